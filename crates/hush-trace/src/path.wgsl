@@ -1,0 +1,323 @@
+// hush's path tracer: one invocation per pixel, `samples_per_dispatch` paths each.
+//
+// Light transport follows Mitsuba 3's `path` integrator: next-event estimation combined with
+// BSDF sampling by multiple importance sampling (power heuristic), Russian roulette from
+// depth RR_DEPTH, and Mitsuba's `max_depth` convention (1 = emitters seen directly,
+// 2 = direct light only). Auxiliary features are taken at the first hit.
+
+struct Params {
+    origin: vec4<f32>,
+    // Camera basis scaled so that a pixel-plane point (sx, sy) in [-1, 1]² maps to
+    // forward + sx * right + sy * up.
+    right: vec4<f32>,
+    up: vec4<f32>,
+    forward: vec4<f32>,
+    width: u32,
+    height: u32,
+    sample_offset: u32,
+    samples_per_dispatch: u32,
+    seed_lo: u32,
+    seed_hi: u32,
+    max_depth: u32,
+    tri_count: u32,
+    light_count: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
+}
+
+// A triangle for intersection. p0.w: material index (bits); e1.w: probability density per
+// unit area of picking a point on this triangle by light sampling (0 if not emissive).
+struct Tri {
+    p0: vec4<f32>,
+    e1: vec4<f32>,
+    e2: vec4<f32>,
+}
+
+// Shading normals at the three vertices; n0.w = 1 for interpolated normals, 0 for flat.
+struct TriNormals {
+    n0: vec4<f32>,
+    n1: vec4<f32>,
+    n2: vec4<f32>,
+}
+
+// reflectance.w: BSDF kind (0 = diffuse). emission.w: 1 if the surface emits.
+struct Material {
+    reflectance: vec4<f32>,
+    emission: vec4<f32>,
+}
+
+// Emissive triangles with the cumulative distribution for picking one by power.
+struct Light {
+    tri: u32,
+    cdf: f32,
+    _pad0: u32,
+    _pad1: u32,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> tris: array<Tri>;
+@group(0) @binding(2) var<storage, read> normals: array<TriNormals>;
+@group(0) @binding(3) var<storage, read> materials: array<Material>;
+@group(0) @binding(4) var<storage, read> lights: array<Light>;
+// Per pixel, ACCUM_STRIDE floats: beauty sum (3), beauty squared sum (3), albedo (3),
+// diffuse (3), specular (3), normal (3), count of non-finite samples discarded (1).
+@group(0) @binding(5) var<storage, read_write> accum: array<f32>;
+
+const PI: f32 = 3.14159265358979;
+const INV_PI: f32 = 0.318309886183791;
+const RR_DEPTH: u32 = 5u;
+const ACCUM_STRIDE: u32 = 19u;
+const T_MAX: f32 = 3.0e38;
+
+// ---- random numbers: PCG hash (Jarzynski & Olano 2020) ----
+
+var<private> rng_state: u32;
+
+fn pcg(v: u32) -> u32 {
+    let state = v * 747796405u + 2891336453u;
+    let word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
+    return (word >> 22u) ^ word;
+}
+
+fn rand() -> f32 {
+    rng_state = pcg(rng_state);
+    return f32(rng_state >> 8u) * (1.0 / 16777216.0);
+}
+
+// ---- geometry ----
+
+struct Hit {
+    t: f32,
+    tri: u32,
+    u: f32,
+    v: f32,
+}
+
+// Möller–Trumbore against every triangle: the nearest hit with t in (0, t_max).
+fn intersect(o: vec3<f32>, d: vec3<f32>, t_max: f32) -> Hit {
+    var hit = Hit(t_max, 0xffffffffu, 0.0, 0.0);
+    for (var i = 0u; i < params.tri_count; i++) {
+        let tri = tris[i];
+        let pv = cross(d, tri.e2.xyz);
+        let det = dot(tri.e1.xyz, pv);
+        if abs(det) < 1e-20 {
+            continue;
+        }
+        let inv = 1.0 / det;
+        let tv = o - tri.p0.xyz;
+        let u = dot(tv, pv) * inv;
+        if u < 0.0 || u > 1.0 {
+            continue;
+        }
+        let qv = cross(tv, tri.e1.xyz);
+        let v = dot(d, qv) * inv;
+        if v < 0.0 || u + v > 1.0 {
+            continue;
+        }
+        let t = dot(tri.e2.xyz, qv) * inv;
+        if t > 0.0 && t < hit.t {
+            hit = Hit(t, i, u, v);
+        }
+    }
+    return hit;
+}
+
+fn occluded(o: vec3<f32>, d: vec3<f32>, t_max: f32) -> bool {
+    return intersect(o, d, t_max).tri != 0xffffffffu;
+}
+
+// Moves a ray origin off the surface, to the side of `n` that `d` points to.
+fn offset_origin(p: vec3<f32>, n: vec3<f32>, d: vec3<f32>) -> vec3<f32> {
+    let scale = 1e-4 * max(1.0, max(abs(p.x), max(abs(p.y), abs(p.z))));
+    return p + n * select(-scale, scale, dot(n, d) > 0.0);
+}
+
+// An orthonormal basis around unit n (Duff et al. 2017).
+fn basis(n: vec3<f32>) -> mat3x3<f32> {
+    let s = select(-1.0, 1.0, n.z >= 0.0);
+    let a = -1.0 / (s + n.z);
+    let b = n.x * n.y * a;
+    let t = vec3<f32>(1.0 + s * n.x * n.x * a, s * b, -s * n.x);
+    let bt = vec3<f32>(b, s + n.y * n.y * a, -n.y);
+    return mat3x3<f32>(t, bt, n);
+}
+
+fn sample_cosine(n: vec3<f32>) -> vec3<f32> {
+    let r = sqrt(rand());
+    let phi = 2.0 * PI * rand();
+    let local = vec3<f32>(r * cos(phi), r * sin(phi), sqrt(max(0.0, 1.0 - r * r)));
+    return normalize(basis(n) * local);
+}
+
+fn power_heuristic(a: f32, b: f32) -> f32 {
+    let a2 = a * a;
+    return a2 / (a2 + b * b);
+}
+
+// Index of the light whose CDF interval holds u (binary search).
+fn pick_light(u: f32) -> u32 {
+    var lo = 0u;
+    var hi = params.light_count - 1u;
+    while lo < hi {
+        let mid = (lo + hi) / 2u;
+        if lights[mid].cdf <= u {
+            lo = mid + 1u;
+        } else {
+            hi = mid;
+        }
+    }
+    return lo;
+}
+
+struct Sample {
+    radiance: vec3<f32>,
+    albedo: vec3<f32>,
+    diffuse: vec3<f32>,
+    specular: vec3<f32>,
+    normal: vec3<f32>,
+}
+
+fn trace(pixel: vec2<u32>) -> Sample {
+    var out = Sample(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
+    // Box filter: a uniform point inside the pixel. Row 0 is the top of the image.
+    let fx = (f32(pixel.x) + rand()) / f32(params.width);
+    let fy = (f32(pixel.y) + rand()) / f32(params.height);
+    var o = params.origin.xyz;
+    var d = normalize(params.forward.xyz + (2.0 * fx - 1.0) * params.right.xyz + (1.0 - 2.0 * fy) * params.up.xyz);
+
+    var throughput = vec3<f32>(1.0);
+    var bsdf_pdf = 0.0;
+    var depth = 0u;
+    loop {
+        let hit = intersect(o, d, T_MAX);
+        if hit.tri == 0xffffffffu {
+            break;
+        }
+        let tri = tris[hit.tri];
+        let p = o + d * hit.t;
+        let ng = normalize(cross(tri.e1.xyz, tri.e2.xyz));
+        let front = dot(ng, d) < 0.0;
+        let nr = normals[hit.tri];
+        var ns = ng;
+        if nr.n0.w > 0.5 {
+            let w = 1.0 - hit.u - hit.v;
+            ns = normalize(w * nr.n0.xyz + hit.u * nr.n1.xyz + hit.v * nr.n2.xyz);
+            // Keep the shading normal on the geometric front side.
+            if dot(ns, ng) < 0.0 {
+                ns = -ns;
+            }
+        }
+        let mat = materials[bitcast<u32>(tri.p0.w)];
+
+        if depth == 0u {
+            out.albedo = mat.reflectance.xyz;
+            out.diffuse = mat.reflectance.xyz;
+            out.normal = ns;
+        }
+
+        // Emission reached by the camera or by BSDF sampling, weighted against light sampling.
+        if mat.emission.w > 0.5 && front {
+            var weight = 1.0;
+            if depth > 0u {
+                let light_pdf = tri.e1.w * hit.t * hit.t / dot(ng, -d);
+                weight = power_heuristic(bsdf_pdf, light_pdf);
+            }
+            out.radiance += throughput * mat.emission.xyz * weight;
+        }
+
+        // One-sided BSDF: nothing scatters from the back side.
+        if depth + 1u >= params.max_depth || !front {
+            break;
+        }
+        let refl = mat.reflectance.xyz;
+
+        // Next-event estimation: a point on a light picked by power.
+        if params.light_count > 0u {
+            let light = lights[pick_light(rand())];
+            let lt = tris[light.tri];
+            var a = rand();
+            var b = rand();
+            if a + b > 1.0 {
+                a = 1.0 - a;
+                b = 1.0 - b;
+            }
+            let lp = lt.p0.xyz + a * lt.e1.xyz + b * lt.e2.xyz;
+            let lng = normalize(cross(lt.e1.xyz, lt.e2.xyz));
+            let to_light = lp - p;
+            let dist2 = dot(to_light, to_light);
+            let dist = sqrt(dist2);
+            let wi = to_light / dist;
+            let cos_light = dot(lng, -wi);
+            let cos_surf = dot(ns, wi);
+            if cos_light > 0.0 && cos_surf > 0.0 && dot(ng, wi) > 0.0 {
+                let origin = offset_origin(p, ng, wi);
+                let to_light2 = lp - origin;
+                if !occluded(origin, normalize(to_light2), length(to_light2) * (1.0 - 1e-4)) {
+                    let light_pdf = lt.e1.w * dist2 / cos_light;
+                    let weight = power_heuristic(light_pdf, cos_surf * INV_PI);
+                    let lmat = materials[bitcast<u32>(lt.p0.w)];
+                    out.radiance += throughput * refl * INV_PI * cos_surf * lmat.emission.xyz * weight / light_pdf;
+                }
+            }
+        }
+
+        // BSDF sampling: cosine-weighted, so the weight f·cos/pdf is the reflectance.
+        let wi = sample_cosine(ns);
+        let cos_i = dot(ns, wi);
+        if cos_i <= 0.0 || dot(ng, wi) <= 0.0 {
+            break;
+        }
+        bsdf_pdf = cos_i * INV_PI;
+        throughput *= refl;
+        depth += 1u;
+
+        if depth >= RR_DEPTH {
+            let q = min(max(throughput.x, max(throughput.y, throughput.z)), 0.95);
+            if rand() >= q {
+                break;
+            }
+            throughput /= q;
+        }
+        if max(throughput.x, max(throughput.y, throughput.z)) <= 0.0 {
+            break;
+        }
+        o = offset_origin(p, ng, wi);
+        d = wi;
+    }
+    return out;
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= params.width || gid.y >= params.height {
+        return;
+    }
+    let pixel_index = gid.y * params.width + gid.x;
+    let base = pixel_index * ACCUM_STRIDE;
+    var acc: array<f32, 19>;
+    for (var k = 0u; k < ACCUM_STRIDE; k++) {
+        acc[k] = accum[base + k];
+    }
+    for (var s = 0u; s < params.samples_per_dispatch; s++) {
+        let sample_index = params.sample_offset + s;
+        rng_state = pcg(pixel_index ^ pcg(sample_index ^ pcg(params.seed_lo ^ pcg(params.seed_hi))));
+        let r = trace(gid.xy);
+        // A non-finite sample would poison the pixel: it is discarded and counted, and the
+        // host reports the count.
+        var c = r.radiance;
+        if !(all(c == c) && all(abs(c) <= vec3<f32>(3.0e38))) {
+            c = vec3<f32>(0.0);
+            acc[18] += 1.0;
+        }
+        acc[0] += c.x; acc[1] += c.y; acc[2] += c.z;
+        acc[3] += c.x * c.x; acc[4] += c.y * c.y; acc[5] += c.z * c.z;
+        acc[6] += r.albedo.x; acc[7] += r.albedo.y; acc[8] += r.albedo.z;
+        acc[9] += r.diffuse.x; acc[10] += r.diffuse.y; acc[11] += r.diffuse.z;
+        acc[12] += r.specular.x; acc[13] += r.specular.y; acc[14] += r.specular.z;
+        acc[15] += r.normal.x; acc[16] += r.normal.y; acc[17] += r.normal.z;
+    }
+    for (var k = 0u; k < ACCUM_STRIDE; k++) {
+        accum[base + k] = acc[k];
+    }
+}

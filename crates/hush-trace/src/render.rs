@@ -1,0 +1,278 @@
+use std::time::Instant;
+
+use bytemuck::{Pod, Zeroable};
+use hush_dataset::Image;
+use hush_scene::Scene;
+use wgpu::util::DeviceExt;
+
+use crate::upload::{flatten, GpuLight, GpuMaterial, GpuNormals, GpuTri};
+use crate::{GpuContext, TraceError};
+
+/// The WGSL source of the path-tracing kernel (validated by a test with naga).
+pub const KERNEL_SOURCE: &str = include_str!("path.wgsl");
+
+/// Floats per pixel in the accumulation buffer; mirrors `ACCUM_STRIDE` in the kernel.
+const ACCUM_STRIDE: usize = 19;
+/// Paths per dispatch to aim for: about a second of work on lavapipe, so progress is smooth.
+const PATHS_PER_DISPATCH: u64 = 1 << 20;
+
+/// What to render beyond the scene itself.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RenderSettings {
+    /// Samples (paths) per pixel; at least 1.
+    pub spp: u32,
+    /// The same seed gives the same image.
+    pub seed: u64,
+}
+
+/// A rendered image and its auxiliary features, all averaged over the pixel's samples.
+#[derive(Clone, Debug)]
+pub struct RenderOutput {
+    /// Beauty, linear RGB radiance.
+    pub color: Image,
+    /// Per channel, the estimated variance of each pixel's mean (sample variance / spp).
+    pub color_variance: Image,
+    /// Reflectance at the first hit (for diffuse surfaces, the diffuse reflectance).
+    pub albedo: Image,
+    /// Diffuse reflectance k_d at the first hit.
+    pub diffuse: Image,
+    /// Specular reflectance k_s at the first hit (0 for purely diffuse surfaces).
+    pub specular: Image,
+    /// World-space shading normal at the first hit, averaged and renormalized; 0 where every
+    /// sample escaped.
+    pub normal: Image,
+    pub spp: u32,
+    /// Non-finite path samples the kernel discarded (0 in a correct render).
+    pub discarded_samples: u64,
+    /// Wall-clock seconds spent tracing (upload and read-back included).
+    pub seconds: f64,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct Params {
+    origin: [f32; 4],
+    right: [f32; 4],
+    up: [f32; 4],
+    forward: [f32; 4],
+    width: u32,
+    height: u32,
+    sample_offset: u32,
+    samples_per_dispatch: u32,
+    seed_lo: u32,
+    seed_hi: u32,
+    max_depth: u32,
+    tri_count: u32,
+    light_count: u32,
+    pad: [u32; 3],
+}
+
+/// Compiled kernels on one device.
+#[derive(Debug)]
+pub struct Renderer<'a> {
+    gpu: &'a GpuContext,
+    pipeline: wgpu::ComputePipeline,
+}
+
+impl<'a> Renderer<'a> {
+    pub fn new(gpu: &'a GpuContext) -> Renderer<'a> {
+        let module = gpu.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("path.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(KERNEL_SOURCE.into()),
+        });
+        let pipeline = gpu.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("path"),
+            layout: None,
+            module: &module,
+            entry_point: Some("main"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        Renderer { gpu, pipeline }
+    }
+
+    /// Renders `scene` with `settings.spp` paths per pixel. `progress(done, total)` is called
+    /// with the samples per pixel finished so far.
+    pub fn render(
+        &self,
+        scene: &Scene,
+        settings: &RenderSettings,
+        progress: &mut dyn FnMut(u32, u32),
+    ) -> Result<RenderOutput, TraceError> {
+        let start = Instant::now();
+        let (w, h) = (scene.film.width, scene.film.height);
+        if settings.spp == 0 {
+            return Err(TraceError::Invalid("--spp must be at least 1".into()));
+        }
+        if w == 0 || h == 0 {
+            return Err(TraceError::Invalid(format!("image size {w}×{h} is empty")));
+        }
+        if scene.max_depth == 0 {
+            return Err(TraceError::Invalid("max_depth must be at least 1".into()));
+        }
+        scene.camera.validate().map_err(TraceError::Invalid)?;
+        let pixels = w as u64 * h as u64;
+        let accum_bytes = pixels * (ACCUM_STRIDE * 4) as u64;
+        let limit = self.gpu.device.limits().max_storage_buffer_binding_size as u64;
+        if accum_bytes > limit {
+            return Err(TraceError::Invalid(format!(
+                "{w}×{h} needs {accum_bytes} bytes of accumulation buffer; this device allows {limit}: render a smaller image"
+            )));
+        }
+
+        let flat = flatten(scene);
+        let device = &self.gpu.device;
+        let storage = |label: &str, bytes: &[u8]| {
+            // Empty storage buffers are not allowed: bind one zeroed element instead.
+            let padded;
+            let contents = if bytes.is_empty() {
+                padded = vec![0u8; 64];
+                &padded[..]
+            } else {
+                bytes
+            };
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+        };
+        let tris = storage("tris", bytemuck::cast_slice::<GpuTri, u8>(&flat.tris));
+        let normals = storage("normals", bytemuck::cast_slice::<GpuNormals, u8>(&flat.normals));
+        let materials = storage("materials", bytemuck::cast_slice::<GpuMaterial, u8>(&flat.materials));
+        let lights = storage("lights", bytemuck::cast_slice::<GpuLight, u8>(&flat.lights));
+        let accum = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("accum"),
+            size: accum_bytes,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let readback = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size: accum_bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let params_buf = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("params"),
+            size: std::mem::size_of::<Params>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let layout = self.pipeline.get_bind_group_layout(0);
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("path"),
+            layout: &layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: params_buf.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: tris.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: normals.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 3, resource: materials.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 4, resource: lights.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 5, resource: accum.as_entire_binding() },
+            ],
+        });
+
+        let cam = &scene.camera;
+        let (forward, right, up) = cam.basis();
+        let tan_y = (cam.fov_y_deg.to_radians() * 0.5).tan();
+        let aspect = w as f32 / h as f32;
+        let mut params = Params {
+            origin: cam.origin.extend(0.0).to_array(),
+            right: (right * tan_y * aspect).extend(0.0).to_array(),
+            up: (up * tan_y).extend(0.0).to_array(),
+            forward: forward.extend(0.0).to_array(),
+            width: w,
+            height: h,
+            sample_offset: 0,
+            samples_per_dispatch: 0,
+            seed_lo: settings.seed as u32,
+            seed_hi: (settings.seed >> 32) as u32,
+            max_depth: scene.max_depth,
+            tri_count: flat.tris.len() as u32,
+            light_count: flat.lights.len() as u32,
+            pad: [0; 3],
+        };
+        let per_dispatch = (PATHS_PER_DISPATCH / pixels).clamp(1, 256) as u32;
+        let mut done = 0u32;
+        while done < settings.spp {
+            let n = per_dispatch.min(settings.spp - done);
+            params.sample_offset = done;
+            params.samples_per_dispatch = n;
+            self.gpu.queue.write_buffer(&params_buf, 0, bytemuck::bytes_of(&params));
+            let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("path") });
+            {
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("path"), timestamp_writes: None });
+                pass.set_pipeline(&self.pipeline);
+                pass.set_bind_group(0, &bind_group, &[]);
+                pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
+            }
+            self.gpu.queue.submit([encoder.finish()]);
+            device
+                .poll(wgpu::PollType::wait_indefinitely())
+                .map_err(|e| TraceError::Gpu(format!("waiting for the render: {e}")))?;
+            done += n;
+            progress(done, settings.spp);
+        }
+
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
+        encoder.copy_buffer_to_buffer(&accum, 0, &readback, 0, accum_bytes);
+        self.gpu.queue.submit([encoder.finish()]);
+        let (tx, rx) = std::sync::mpsc::channel();
+        readback.map_async(wgpu::MapMode::Read, .., move |r| {
+            let _ = tx.send(r);
+        });
+        device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| TraceError::Gpu(format!("reading the image back: {e}")))?;
+        rx.recv()
+            .map_err(|_| TraceError::Gpu("read-back never completed".into()))?
+            .map_err(|e| TraceError::Gpu(format!("reading the image back: {e}")))?;
+        let view = readback.get_mapped_range(..).map_err(|e| TraceError::Gpu(format!("mapping the image: {e}")))?;
+        let data: Vec<f32> = bytemuck::cast_slice(&view).to_vec();
+        drop(view);
+        readback.unmap();
+
+        let mut out = unpack(&data, w as usize, h as usize, settings.spp);
+        out.seconds = start.elapsed().as_secs_f64();
+        Ok(out)
+    }
+}
+
+/// Turns per-pixel sums into means, variances of the mean and unit normals.
+fn unpack(data: &[f32], w: usize, h: usize, spp: u32) -> RenderOutput {
+    let n = spp as f64;
+    let image = |channels| Image { width: w, height: h, channels, data: Vec::with_capacity(w * h * channels) };
+    let (mut color, mut var, mut albedo, mut diffuse, mut specular, mut normal) =
+        (image(3), image(3), image(3), image(3), image(3), image(3));
+    let mut discarded = 0u64;
+    for px in data.chunks_exact(ACCUM_STRIDE) {
+        for c in 0..3 {
+            let mean = px[c] as f64 / n;
+            let second = px[3 + c] as f64 / n;
+            color.data.push(mean as f32);
+            // Unbiased sample variance, divided by n for the variance of the mean.
+            let sample_var = if spp > 1 { ((second - mean * mean) * n / (n - 1.0)).max(0.0) } else { 0.0 };
+            var.data.push((sample_var / n) as f32);
+            albedo.data.push((px[6 + c] as f64 / n) as f32);
+            diffuse.data.push((px[9 + c] as f64 / n) as f32);
+            specular.data.push((px[12 + c] as f64 / n) as f32);
+        }
+        let nrm = glam::Vec3::from_slice(&px[15..18]);
+        let len = nrm.length();
+        let unit = if len > 1e-12 { nrm / len } else { glam::Vec3::ZERO };
+        normal.data.extend_from_slice(&unit.to_array());
+        discarded += px[18] as u64;
+    }
+    RenderOutput {
+        color,
+        color_variance: var,
+        albedo,
+        diffuse,
+        specular,
+        normal,
+        spp,
+        discarded_samples: discarded,
+        seconds: 0.0,
+    }
+}

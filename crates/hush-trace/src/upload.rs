@@ -1,0 +1,86 @@
+//! Flattens a [`Scene`] into the arrays the kernel reads.
+
+use bytemuck::{Pod, Zeroable};
+use glam::Vec3;
+use hush_scene::{Material, Scene};
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub(crate) struct GpuTri {
+    pub p0: [f32; 4],
+    pub e1: [f32; 4],
+    pub e2: [f32; 4],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub(crate) struct GpuNormals {
+    pub n: [[f32; 4]; 3],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub(crate) struct GpuMaterial {
+    pub reflectance: [f32; 4],
+    pub emission: [f32; 4],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub(crate) struct GpuLight {
+    pub tri: u32,
+    pub cdf: f32,
+    pub pad: [u32; 2],
+}
+
+pub(crate) struct GpuScene {
+    pub tris: Vec<GpuTri>,
+    pub normals: Vec<GpuNormals>,
+    pub materials: Vec<GpuMaterial>,
+    pub lights: Vec<GpuLight>,
+}
+
+fn v4(v: Vec3, w: f32) -> [f32; 4] {
+    [v.x, v.y, v.z, w]
+}
+
+/// Each mesh becomes one material record (its BSDF and emission). Emissive triangles are
+/// picked in proportion to their power (area × summed RGB radiance); the kernel's per-area
+/// density of a light point is that probability divided by the triangle's area, stored in `e1.w`.
+pub(crate) fn flatten(scene: &Scene) -> GpuScene {
+    let mut tris = Vec::with_capacity(scene.triangle_count());
+    let mut normals = Vec::with_capacity(scene.triangle_count());
+    let mut materials = Vec::with_capacity(scene.meshes.len());
+    let mut light_weights = Vec::new();
+    for (mi, mesh) in scene.meshes.iter().enumerate() {
+        let Material::Diffuse { reflectance } = mesh.material;
+        let emission = mesh.emission.unwrap_or(Vec3::ZERO);
+        let emits = emission.max_element() > 0.0;
+        materials.push(GpuMaterial { reflectance: v4(reflectance, 0.0), emission: v4(emission, emits as u32 as f32) });
+        for (ti, idx) in mesh.indices.iter().enumerate() {
+            let [a, b, c] = idx.map(|k| mesh.positions[k as usize]);
+            if emits {
+                light_weights.push((tris.len() as u32, mesh.triangle_area(ti) * emission.element_sum()));
+            }
+            tris.push(GpuTri { p0: v4(a, f32::from_bits(mi as u32)), e1: v4(b - a, 0.0), e2: v4(c - a, 0.0) });
+            normals.push(match &mesh.normals {
+                Some(n) => GpuNormals { n: idx.map(|k| v4(n[k as usize], 1.0)) },
+                None => GpuNormals { n: [[0.0; 4]; 3] },
+            });
+        }
+    }
+    let total: f64 = light_weights.iter().map(|&(_, w)| w as f64).sum();
+    let mut lights = Vec::with_capacity(light_weights.len());
+    let mut running = 0.0f64;
+    for &(tri, w) in &light_weights {
+        running += w as f64;
+        let t = &mut tris[tri as usize];
+        let area = 0.5 * Vec3::from_slice(&t.e1[..3]).cross(Vec3::from_slice(&t.e2[..3])).length();
+        t.e1[3] = (w as f64 / total / area as f64) as f32;
+        lights.push(GpuLight { tri, cdf: (running / total) as f32, pad: [0; 2] });
+    }
+    if let Some(last) = lights.last_mut() {
+        last.cdf = 1.0;
+    }
+    GpuScene { tris, normals, materials, lights }
+}
