@@ -61,7 +61,11 @@ impl Parser<'_, '_> {
 
     fn float(&self, node: Node) -> Result<f32, SceneError> {
         let v = self.attr(node, "value")?;
-        v.trim().parse::<f32>().ok().filter(|x| x.is_finite()).ok_or_else(|| self.err(node, format!("'{v}' is not a finite number")))
+        v.trim()
+            .parse::<f32>()
+            .ok()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| self.err(node, format!("'{v}' is not a finite number")))
     }
 
     fn int(&self, node: Node) -> Result<i64, SceneError> {
@@ -78,8 +82,11 @@ impl Parser<'_, '_> {
     }
 
     fn vec3(&self, node: Node, text: &str) -> Result<Vec3, SceneError> {
-        let parts: Result<Vec<f32>, _> =
-            text.split(|c: char| c == ',' || c.is_whitespace()).filter(|s| !s.is_empty()).map(str::parse::<f32>).collect();
+        let parts: Result<Vec<f32>, _> = text
+            .split(|c: char| c == ',' || c.is_whitespace())
+            .filter(|s| !s.is_empty())
+            .map(str::parse::<f32>)
+            .collect();
         match parts.as_deref() {
             Ok([x]) if x.is_finite() => Ok(Vec3::splat(*x)),
             Ok([x, y, z]) if [x, y, z].iter().all(|v| v.is_finite()) => Ok(Vec3::new(*x, *y, *z)),
@@ -177,9 +184,8 @@ impl Parser<'_, '_> {
             }
         }
         let (fov, fov_node) = fov.ok_or_else(|| self.err(node, "the sensor needs <float name=\"fov\">"))?;
-        let (origin, target, up) = lookat.ok_or_else(|| {
-            self.err(node, "the sensor needs <transform name=\"to_world\"> with a <lookat>")
-        })?;
+        let (origin, target, up) =
+            lookat.ok_or_else(|| self.err(node, "the sensor needs <transform name=\"to_world\"> with a <lookat>"))?;
         let (w, h) = (film.width as f32, film.height as f32);
         let half = (fov.to_radians() * 0.5).tan();
         // Convert the field of view along `fov_axis` to the vertical one.
@@ -191,7 +197,9 @@ impl Parser<'_, '_> {
             "larger" if w > h => half * h / w,
             "larger" => half,
             "diagonal" => half * h / (w * w + h * h).sqrt(),
-            other => return Err(self.err(fov_node, format!("unknown fov_axis '{other}' (x, y, smaller, larger, diagonal)"))),
+            other => {
+                return Err(self.err(fov_node, format!("unknown fov_axis '{other}' (x, y, smaller, larger, diagonal)")));
+            }
         };
         let camera = Camera { origin, target, up, fov_y_deg: 2.0 * tan_y.atan().to_degrees() };
         Ok((camera, film, spp))

@@ -103,16 +103,11 @@ impl Scene {
     pub fn load(path: &std::path::Path) -> Result<Scene, crate::SceneError> {
         match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
             Some("xml") => {
-                let text = std::fs::read_to_string(path).map_err(|e| {
-                    crate::SceneError::new(path, None, format!("cannot read scene file: {e}"))
-                })?;
+                let text = std::fs::read_to_string(path)
+                    .map_err(|e| crate::SceneError::new(path, None, format!("cannot read scene file: {e}")))?;
                 Scene::from_mitsuba_str(&text, path)
             }
-            _ => Err(crate::SceneError::new(
-                path,
-                None,
-                "unknown scene format: hush reads Mitsuba XML scenes (.xml)",
-            )),
+            _ => Err(crate::SceneError::new(path, None, "unknown scene format: hush reads Mitsuba XML scenes (.xml)")),
         }
     }
 

@@ -21,8 +21,8 @@ pub fn load_obj(path: &Path, material: Material) -> Result<Mesh, SceneError> {
         ..Default::default()
     };
     // Materials of Mitsuba scenes live in the scene file, so the OBJ's own `mtllib` is not read.
-    let (models, _materials) = tobj::load_obj(path, &options)
-        .map_err(|e| SceneError::new(path, None, format!("malformed OBJ: {e}")))?;
+    let (models, _materials) =
+        tobj::load_obj(path, &options).map_err(|e| SceneError::new(path, None, format!("malformed OBJ: {e}")))?;
 
     let mut positions = Vec::new();
     let mut normals = Vec::new();
@@ -38,7 +38,11 @@ pub fn load_obj(path: &Path, material: Material) -> Result<Mesh, SceneError> {
                 return Err(SceneError::new(
                     path,
                     None,
-                    format!("vertex {} of object '{}' is not finite ({v}): fix or re-export the mesh", k + 1, model.name),
+                    format!(
+                        "vertex {} of object '{}' is not finite ({v}): fix or re-export the mesh",
+                        k + 1,
+                        model.name
+                    ),
                 ));
             }
             positions.push(v);
@@ -47,7 +51,11 @@ pub fn load_obj(path: &Path, material: Material) -> Result<Mesh, SceneError> {
             for n in m.normals.chunks_exact(3) {
                 let v = Vec3::new(n[0], n[1], n[2]);
                 if !v.is_finite() {
-                    return Err(SceneError::new(path, None, format!("object '{}' has a non-finite normal", model.name)));
+                    return Err(SceneError::new(
+                        path,
+                        None,
+                        format!("object '{}' has a non-finite normal", model.name),
+                    ));
                 }
                 normals.push(v);
             }
@@ -56,7 +64,11 @@ pub fn load_obj(path: &Path, material: Material) -> Result<Mesh, SceneError> {
         }
         for t in m.indices.chunks_exact(3) {
             if t.iter().any(|&i| i as usize >= count) {
-                return Err(SceneError::new(path, None, format!("object '{}' has a face index out of range", model.name)));
+                return Err(SceneError::new(
+                    path,
+                    None,
+                    format!("object '{}' has a face index out of range", model.name),
+                ));
             }
             indices.push([base + t[0], base + t[1], base + t[2]]);
         }

@@ -20,7 +20,7 @@ mod render;
 mod upload;
 
 pub use gpu::{GpuContext, INSTALL_HINT};
-pub use render::{RenderOutput, RenderSettings, Renderer, KERNEL_SOURCE};
+pub use render::{KERNEL_SOURCE, RenderOutput, RenderSettings, Renderer};
 
 /// Why a render could not run.
 #[derive(Debug, thiserror::Error)]

@@ -5,7 +5,7 @@ use hush_dataset::Image;
 use hush_scene::Scene;
 use wgpu::util::DeviceExt;
 
-use crate::upload::{flatten, GpuLight, GpuMaterial, GpuNormals, GpuTri};
+use crate::upload::{GpuLight, GpuMaterial, GpuNormals, GpuTri, flatten};
 use crate::{GpuContext, TraceError};
 
 /// The WGSL source of the path-tracing kernel (validated by a test with naga).
@@ -202,7 +202,8 @@ impl<'a> Renderer<'a> {
             self.gpu.queue.write_buffer(&params_buf, 0, bytemuck::bytes_of(&params));
             let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("path") });
             {
-                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("path"), timestamp_writes: None });
+                let mut pass = encoder
+                    .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("path"), timestamp_writes: None });
                 pass.set_pipeline(&self.pipeline);
                 pass.set_bind_group(0, &bind_group, &[]);
                 pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);

@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-use hush_dataset::{read_rgb, Image};
+use hush_dataset::{Image, read_rgb};
 use hush_scene::Scene;
 use hush_trace::{GpuContext, RenderOutput, RenderSettings, Renderer};
 
@@ -84,7 +84,13 @@ fn cornell_box_is_unbiased_against_mitsuba() {
     let (ours, theirs) = (out.color.mean(), reference.mean());
     for c in 0..3 {
         let rel = (ours[c] - theirs[c]).abs() / theirs[c];
-        assert!(rel < 0.005, "channel {c} image mean: hush {} vs Mitsuba {} ({:.3} %)", ours[c], theirs[c], rel * 100.0);
+        assert!(
+            rel < 0.005,
+            "channel {c} image mean: hush {} vs Mitsuba {} ({:.3} %)",
+            ours[c],
+            theirs[c],
+            rel * 100.0
+        );
     }
     eprintln!("worst block deviation: {:.2} of its tolerance", worst);
 }

@@ -1,0 +1,37 @@
+//! Metrics (PSNR, SSIM, MAE, MSE after Open Image Denoise's tonemap; relMSE on HDR), timing and reports for
+//! hush denoisers.
+//!
+//! Conventions: every metric takes `(test, reference)`. Both images are tonemapped with the exposure
+//! computed from the **reference** ([`exposure_of`]: OIDN's autoexposure), then OIDN's filmic curve and sRGB
+//! ([`tonemap`]); PSNR, SSIM, MAE and MSE compare those [0, 1] images, relMSE the linear ones. SSIM is
+//! `hush_net::loss::ssim`, the same code as the training loss. See [`CONVENTIONS`].
+//!
+//! ```
+//! # fn main() -> hush_eval::Result<()> {
+//! use hush_dataset::Image;
+//! use hush_eval::{compare, Report, Row};
+//!
+//! let reference = Image::from_fn(16, 16, 3, |x, y, _| 0.1 + 0.01 * (x + y) as f32);
+//! let mut noisy = reference.clone();
+//! noisy.pixel_mut(3, 4)[0] += 0.5;
+//! let m = compare(&noisy, &reference)?;
+//! assert!(m.psnr > 30.0 && m.ssim < 1.0);
+//! assert!(compare(&reference, &reference)?.psnr.is_infinite());
+//!
+//! let report = Report { rows: vec![Row::new("cbox_v0", "noisy", 4, &m, None)], notes: vec![] };
+//! assert!(report.to_markdown().contains("| noisy | 4 |"));
+//! # Ok(())
+//! # }
+//! ```
+
+mod error;
+mod metrics;
+mod report;
+mod timing;
+mod tonemap;
+
+pub use error::{Error, Result};
+pub use metrics::{Metrics, compare, mae, mse, psnr, psnr_of_mse, rel_mse, ssim, ssim_tonemapped};
+pub use report::{CONVENTIONS, Report, Row};
+pub use timing::{Timing, time_median};
+pub use tonemap::{exposure_of, filmic, tonemap};

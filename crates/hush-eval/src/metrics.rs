@@ -1,0 +1,133 @@
+//! Image quality metrics. Every function takes `(test, reference)`.
+//!
+//! Conventions (also printed in every report, see [`crate::CONVENTIONS`]):
+//! * `psnr`, `ssim`, `mae`, `mse` compare the **tonemapped** images `tonemap(x, exposure_of(reference))`
+//!   (OIDN's filmic curve + sRGB, values in [0, 1], see [`crate::tonemap`]); `psnr = 10·log10(1 / mse)`,
+//!   +∞ for identical images.
+//! * `rel_mse` compares the **linear HDR** images: mean over all samples of `(x − ref)² / (ref² + 0.01)`.
+//! * Both images must be RGB of the same size and free of NaN/Inf (the error names the image and pixel).
+
+use candle_core::{Device, Tensor};
+use hush_dataset::{Image, check_finite};
+use serde::{Deserialize, Serialize};
+
+use crate::{Error, Result, exposure_of, tonemap};
+
+/// All metrics of one `(test, reference)` pair.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Metrics {
+    /// dB, on tonemapped images; `f64::INFINITY` when they are identical.
+    pub psnr: f64,
+    /// Mean SSIM on tonemapped images (hush-net's SSIM: Gaussian 11/1.5, valid, data range 1).
+    pub ssim: f64,
+    /// Mean absolute error on tonemapped images.
+    pub mae: f64,
+    /// Mean squared error on tonemapped images.
+    pub mse: f64,
+    /// Relative MSE on linear HDR images.
+    pub rel_mse: f64,
+    /// The exposure both images were tonemapped with (from the reference).
+    pub exposure: f32,
+}
+
+/// Computes every metric at once (tonemapping each image once).
+pub fn compare(test: &Image, reference: &Image) -> Result<Metrics> {
+    check_pair(test, reference)?;
+    let exposure = exposure_of(reference)?;
+    let (t, r) = (tonemap(test, exposure), tonemap(reference, exposure));
+    let mse = mean_by(&t, &r, |d, _| d * d);
+    Ok(Metrics {
+        psnr: psnr_of_mse(mse),
+        ssim: ssim_tonemapped(&t, &r)?,
+        mae: mean_by(&t, &r, |d, _| d.abs()),
+        mse,
+        rel_mse: mean_by(test, reference, rel_se),
+        exposure,
+    })
+}
+
+/// PSNR in dB of the tonemapped images: `10·log10(1 / mse)`; `f64::INFINITY` if they are identical.
+pub fn psnr(test: &Image, reference: &Image) -> Result<f64> {
+    Ok(psnr_of_mse(mse(test, reference)?))
+}
+
+/// Mean SSIM of the tonemapped images, computed by `hush_net::loss::ssim` (the training loss's code).
+pub fn ssim(test: &Image, reference: &Image) -> Result<f64> {
+    let (t, r) = tonemapped_pair(test, reference)?;
+    ssim_tonemapped(&t, &r)
+}
+
+/// Mean absolute error of the tonemapped images.
+pub fn mae(test: &Image, reference: &Image) -> Result<f64> {
+    let (t, r) = tonemapped_pair(test, reference)?;
+    Ok(mean_by(&t, &r, |d, _| d.abs()))
+}
+
+/// Mean squared error of the tonemapped images.
+pub fn mse(test: &Image, reference: &Image) -> Result<f64> {
+    let (t, r) = tonemapped_pair(test, reference)?;
+    Ok(mean_by(&t, &r, |d, _| d * d))
+}
+
+/// Relative MSE of the linear HDR images: mean of `(x − ref)² / (ref² + 0.01)` over all samples.
+pub fn rel_mse(test: &Image, reference: &Image) -> Result<f64> {
+    check_pair(test, reference)?;
+    Ok(mean_by(test, reference, rel_se))
+}
+
+/// `10·log10(1 / mse)` for images in [0, 1]; +∞ for `mse == 0`.
+pub fn psnr_of_mse(mse: f64) -> f64 {
+    if mse <= 0.0 { f64::INFINITY } else { -10.0 * mse.log10() }
+}
+
+/// Mean SSIM of two images already in [0, 1] (no tonemapping), via `hush_net::loss::ssim`.
+/// Both must be at least 11×11 (the window); channels are averaged.
+pub fn ssim_tonemapped(test: &Image, reference: &Image) -> Result<f64> {
+    same_size(test, reference)?;
+    let (x, y) = (to_nchw(test)?, to_nchw(reference)?);
+    let value = hush_net::loss::ssim(&x, &y)?.to_dtype(candle_core::DType::F64)?.to_scalar::<f64>()?;
+    Ok(value)
+}
+
+fn rel_se(d: f64, reference: f64) -> f64 {
+    d * d / (reference * reference + 1e-2)
+}
+
+fn to_nchw(image: &Image) -> Result<Tensor> {
+    let t = Tensor::from_slice(&image.data, (image.height, image.width, image.channels), &Device::Cpu)?;
+    Ok(t.permute((2, 0, 1))?.unsqueeze(0)?.contiguous()?)
+}
+
+fn tonemapped_pair(test: &Image, reference: &Image) -> Result<(Image, Image)> {
+    check_pair(test, reference)?;
+    let exposure = exposure_of(reference)?;
+    Ok((tonemap(test, exposure), tonemap(reference, exposure)))
+}
+
+/// Mean over samples of `f(test − reference, reference)`, accumulated in f64.
+fn mean_by(test: &Image, reference: &Image, f: impl Fn(f64, f64) -> f64) -> f64 {
+    let sum: f64 =
+        test.data.iter().zip(&reference.data).map(|(&t, &r)| f(f64::from(t) - f64::from(r), f64::from(r))).sum();
+    sum / test.data.len().max(1) as f64
+}
+
+fn same_size(test: &Image, reference: &Image) -> Result<()> {
+    if (test.width, test.height, test.channels) != (reference.width, reference.height, reference.channels) {
+        return Err(Error::Shape(format!(
+            "metrics: test image is {} but the reference is {}",
+            test.size_string(),
+            reference.size_string()
+        )));
+    }
+    Ok(())
+}
+
+fn check_pair(test: &Image, reference: &Image) -> Result<()> {
+    same_size(test, reference)?;
+    if reference.channels != 3 {
+        return Err(Error::Shape(format!("metrics: images must be RGB, got {}", reference.size_string())));
+    }
+    check_finite("test image", test).map_err(Error::NonFinite)?;
+    check_finite("reference image", reference).map_err(Error::NonFinite)?;
+    Ok(())
+}

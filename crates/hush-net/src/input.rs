@@ -1,0 +1,174 @@
+//! What the network sees: noisy HDR color plus auxiliary features, prepared as Open Image Denoise does.
+//!
+//! Per pixel, as OIDN's `core/input_process_kernel.h` and `training/dataset.py`:
+//! * color (and the training target): NaN → 0, clamped to ≥ 0, × exposure, then the transfer function,
+//!   then clamped to ≤ 1 (OIDN's `preprocess.py` clamps the transferred color and target to ≤ 1);
+//! * albedo-like features (albedo, diffuse, specular reflectance): NaN → 0, clamped to [0, 1];
+//! * normals: NaN → 0, clamped to [-1, 1], then mapped to [0, 1] by `n · 0.5 + 0.5`.
+//!
+//! Channel order: color first, then the auxiliary features in the order of [`Features::aux`], 3 each.
+
+use candle_core::{Result, bail};
+use serde::{Deserialize, Serialize};
+
+use crate::transfer::Transfer;
+
+/// An auxiliary feature image (3 channels each).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Feature {
+    /// Reflectance at the first non-specular hit.
+    Albedo,
+    /// Shading normal at the first hit, components in [-1, 1].
+    Normal,
+    /// Diffuse reflectance k_d at the first non-specular hit (thesis §6.2).
+    Diffuse,
+    /// Specular reflectance k_s at the first non-specular hit (thesis §6.2).
+    Specular,
+}
+
+impl Feature {
+    pub const ALL: [Feature; 4] = [Feature::Albedo, Feature::Normal, Feature::Diffuse, Feature::Specular];
+
+    /// The short name used in file names and feature lists: `alb`, `nrm`, `diff`, `spec`.
+    pub fn short_name(self) -> &'static str {
+        match self {
+            Feature::Albedo => "alb",
+            Feature::Normal => "nrm",
+            Feature::Diffuse => "diff",
+            Feature::Specular => "spec",
+        }
+    }
+
+    /// The long name, as serialized: `albedo`, `normal`, `diffuse`, `specular`.
+    pub fn long_name(self) -> &'static str {
+        match self {
+            Feature::Albedo => "albedo",
+            Feature::Normal => "normal",
+            Feature::Diffuse => "diffuse",
+            Feature::Specular => "specular",
+        }
+    }
+
+    /// Parses a short name (`alb`) or a long one (`albedo`).
+    pub fn parse(name: &str) -> Option<Feature> {
+        Feature::ALL.into_iter().find(|f| name == f.short_name() || name == f.long_name())
+    }
+
+    /// The network's view of one feature sample.
+    fn prepare(self, v: f32) -> f32 {
+        let v = if v.is_nan() { 0.0 } else { v };
+        match self {
+            Feature::Normal => v.clamp(-1.0, 1.0) * 0.5 + 0.5,
+            Feature::Albedo | Feature::Diffuse | Feature::Specular => v.clamp(0.0, 1.0),
+        }
+    }
+}
+
+/// The network's input features: the noisy color (always, first) and the auxiliary features in order.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Features {
+    pub aux: Vec<Feature>,
+}
+
+impl Features {
+    /// Fails on a repeated feature.
+    pub fn new(aux: Vec<Feature>) -> Result<Self> {
+        for (i, f) in aux.iter().enumerate() {
+            if aux[..i].contains(f) {
+                bail!("feature {} is listed twice", f.short_name())
+            }
+        }
+        Ok(Features { aux })
+    }
+
+    /// Parses a comma-separated list of auxiliary features, e.g. `"diff,spec,nrm"` (the thesis' best) or
+    /// `"alb,nrm"` (OIDN's); `""` or `"none"` means color only. `hdr` or `color` (the always-present noisy color) is accepted and ignored.
+    pub fn parse(list: &str) -> Result<Self> {
+        let mut aux = Vec::new();
+        for name in list.split(',').map(str::trim).filter(|s| !s.is_empty() && !matches!(*s, "none" | "hdr" | "color"))
+        {
+            match Feature::parse(name) {
+                Some(f) => aux.push(f),
+                None => bail!("unknown feature {name:?}; known: alb, nrm, diff, spec"),
+            }
+        }
+        Features::new(aux)
+    }
+
+    /// 3 for the color plus 3 per auxiliary feature.
+    pub fn in_channels(&self) -> usize {
+        3 + 3 * self.aux.len()
+    }
+}
+
+impl std::fmt::Display for Features {
+    /// `hdr,diff,spec,nrm`: the form [`Features::parse`] reads back.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("hdr")?;
+        for a in &self.aux {
+            write!(f, ",{}", a.short_name())?;
+        }
+        Ok(())
+    }
+}
+
+/// Color (or target) radiance as the network sees it: `min(1, transfer(exposure · max(0, v)))`, NaN → 0.
+pub fn prepare_color(rgb: &[f32], exposure: f32, transfer: Transfer) -> Vec<f32> {
+    rgb.iter()
+        .map(|&v| {
+            let v = if v.is_nan() { 0.0 } else { v.max(0.0) };
+            transfer.forward(v * exposure).min(1.0)
+        })
+        .collect()
+}
+
+/// The inverse of [`prepare_color`] for network output: clamp ≥ 0, inverse transfer, ÷ exposure.
+pub fn finish_color(out: &[f32], exposure: f32, transfer: Transfer) -> Vec<f32> {
+    out.iter()
+        .map(|&v| {
+            let v = if v.is_nan() { 0.0 } else { v.max(0.0) };
+            transfer.inverse(v).max(0.0) / exposure
+        })
+        .collect()
+}
+
+/// Builds the interleaved (HWC) network input from linear color and the auxiliary images listed in
+/// `features` (same order), each interleaved RGB/XYZ of `width × height × 3` values. `exposure` is usually
+/// [`crate::transfer::autoexposure`] of the color (at inference) or of the reference (in training, as
+/// OIDN's `preprocess.py` does, so input and target share it).
+pub fn build_input(
+    features: &Features,
+    width: usize,
+    height: usize,
+    color: &[f32],
+    aux: &[&[f32]],
+    exposure: f32,
+    transfer: Transfer,
+) -> Result<Vec<f32>> {
+    let n = width * height * 3;
+    if color.len() != n {
+        bail!("build_input: color has {} values, a {width}x{height} RGB image needs {n}", color.len())
+    }
+    if aux.len() != features.aux.len() {
+        bail!("build_input: {} auxiliary images given for features {features}", aux.len())
+    }
+    for (f, a) in features.aux.iter().zip(aux) {
+        if a.len() != n {
+            bail!("build_input: {} has {} values, a {width}x{height}x3 image needs {n}", f.short_name(), a.len())
+        }
+    }
+    if !(exposure.is_finite() && exposure > 0.0) {
+        bail!("build_input: exposure must be finite and > 0, got {exposure}")
+    }
+    let channels = features.in_channels();
+    let color = prepare_color(color, exposure, transfer);
+    let mut out = Vec::with_capacity(width * height * channels);
+    for p in 0..width * height {
+        out.extend_from_slice(&color[3 * p..3 * p + 3]);
+        for (f, a) in features.aux.iter().zip(aux) {
+            out.extend(a[3 * p..3 * p + 3].iter().map(|&v| f.prepare(v)));
+        }
+    }
+    Ok(out)
+}

@@ -1,0 +1,48 @@
+//! Candle U-Nets, losses and HDR transfer functions for Monte-Carlo denoising. No file I/O.
+//!
+//! * [`UNet`] / [`UNetConfig`]: Open Image Denoise's `unet` (same layer names, so the safetensors keys are
+//!   OIDN's: `enc_conv0.weight`, ..., `dec_conv0.bias`), with a width multiplier. NCHW f32.
+//!   [`init_weights`] gives a reproducible initialization (candle's CPU generator cannot be seeded).
+//! * [`loss`]: L1, MSE, SSIM, MS-SSIM and the thesis' mix 0.16·L1 + 0.84·(1 − MS-SSIM); `ssim` doubles as
+//!   the evaluation metric.
+//! * [`transfer`]: autoexposure and the PU / log / sRGB transfer functions, on values and tensors.
+//! * [`build_input`] / [`prepare_color`] / [`finish_color`]: the network's input and output, as OIDN
+//!   prepares them ([`Features`] says which auxiliary images go in, in which order).
+//! * [`save_weights`] / [`load_weights`] / [`load_model`] / [`read_metadata`]: safetensors bytes carrying a
+//!   [`ModelInfo`] (network, features, transfer) as metadata. Reading and writing files is the caller's job.
+//!
+//! Device-agnostic: everything takes the device from its inputs or a `&Device`.
+//!
+//! ```
+//! # fn main() -> candle_core::Result<()> {
+//! use candle_core::{DType, Device, Module, Tensor};
+//! use candle_nn::{VarBuilder, VarMap};
+//! use hush_net::{UNet, UNetConfig, UNetKind};
+//!
+//! let device = Device::Cpu;
+//! let cfg = UNetConfig { kind: UNetKind::Unet, in_channels: 9, out_channels: 3, width: 0.25 };
+//! let varmap = VarMap::new();
+//! let net = UNet::new(VarBuilder::from_varmap(&varmap, DType::F32, &device), &cfg)?;
+//!
+//! // A 1×9×20×24 input (color, albedo, normal): padded to 32×32 inside, cropped back.
+//! let noisy = Tensor::rand(0f32, 1f32, (1, 9, 20, 24), &device)?;
+//! let denoised = net.forward_padded(&noisy)?;
+//! assert_eq!(denoised.dims(), &[1, 3, 20, 24]);
+//!
+//! // Sizes that are multiples of 16 go straight through `Module::forward`.
+//! let out = net.forward(&Tensor::zeros((2, 9, 32, 16), DType::F32, &device)?)?;
+//! assert_eq!(out.dims(), &[2, 3, 32, 16]);
+//! # Ok(())
+//! # }
+//! ```
+
+mod input;
+pub mod loss;
+pub mod transfer;
+mod unet;
+mod weights;
+
+pub use input::{Feature, Features, build_input, finish_color, prepare_color};
+pub use loss::Loss;
+pub use unet::{ALIGNMENT, UNet, UNetConfig, UNetKind, crop, hwc_to_nchw, init_weights, nchw_to_hwc, pad_to_multiple};
+pub use weights::{METADATA_KEY, ModelInfo, load_model, load_weights, read_metadata, save_weights};

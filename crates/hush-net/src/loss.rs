@@ -1,0 +1,291 @@
+//! Training losses and the SSIM metric, on NCHW tensors. Every function checks shapes first and returns a
+//! scalar (rank-0) tensor through which gradients flow.
+//!
+//! SSIM follows Open Image Denoise's `training/ssim.py` (itself pytorch-msssim): an 11-tap Gaussian window
+//! with σ = 1.5 applied separably as a *valid* convolution, K1 = 0.01, K2 = 0.03, data range 1, per image and
+//! channel, then averaged. MS-SSIM uses 5 scales with 2×2 average pooling between them, contrast-structure
+//! at scales 1–4 and full SSIM at scale 5, each clamped at 0 (ReLU) before being raised to its weight.
+//!
+//! Two deliberate differences from OIDN:
+//! * Numerical stability: σ² = `E[x²] − E[x]²` cancels catastrophically in f32 for large values
+//!   (1e4 + noise). Variance and covariance are shift invariant, so each image channel is first shifted
+//!   by a constant, the mean of `(x + y) / 2` over that channel, before filtering; the constant is added
+//!   back to the local means for the luminance term. Values are unchanged in exact arithmetic.
+//! * Small images: OIDN asserts a side > 160 px. Here MS-SSIM uses as many scales as fit (the smallest
+//!   side must stay ≥ 11 after each halving, halving rounds down, so 5 scales need a side ≥ 176) with the
+//!   weights of those scales renormalized to sum to 1; one scale is plain SSIM. Sides < 11 are an error.
+//!   Odd sides drop their last row/column when halved (OIDN pads them instead).
+
+use candle_core::{CpuStorage, CustomOp1, DType, Layout, Result, Shape, Tensor, bail};
+use serde::{Deserialize, Serialize};
+
+/// Side of the Gaussian window.
+pub const SSIM_WINDOW: usize = 11;
+/// Standard deviation of the Gaussian window, in pixels.
+pub const SSIM_SIGMA: f64 = 1.5;
+const K1: f64 = 0.01;
+const K2: f64 = 0.03;
+const DATA_RANGE: f64 = 1.0;
+const C1: f64 = (K1 * DATA_RANGE) * (K1 * DATA_RANGE);
+const C2: f64 = (K2 * DATA_RANGE) * (K2 * DATA_RANGE);
+
+/// Wang et al.'s MS-SSIM scale weights, finest scale first.
+pub const MS_SSIM_WEIGHTS: [f64; 5] = [0.0448, 0.2856, 0.3001, 0.2363, 0.1333];
+
+/// Weight of L1 in [`mix`] (the rest goes to 1 − MS-SSIM): thesis eq. 7.1, OIDN's `l1_msssim`.
+pub const MIX_L1_WEIGHT: f64 = 0.16;
+
+/// The loss functions hush trains with.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Loss {
+    /// Mean absolute error.
+    L1,
+    /// Mean squared error.
+    Mse,
+    /// 1 − SSIM.
+    Ssim,
+    /// 1 − MS-SSIM.
+    MsSsim,
+    /// 0.16 · L1 + 0.84 · (1 − MS-SSIM): the thesis' best loss.
+    #[default]
+    Mix,
+}
+
+impl Loss {
+    /// The loss of prediction `x` against target `y` (both NCHW), a scalar tensor.
+    pub fn compute(&self, x: &Tensor, y: &Tensor) -> Result<Tensor> {
+        match self {
+            Loss::L1 => l1(x, y),
+            Loss::Mse => mse(x, y),
+            Loss::Ssim => ssim(x, y)?.affine(-1.0, 1.0),
+            Loss::MsSsim => ms_ssim(x, y)?.affine(-1.0, 1.0),
+            Loss::Mix => mix(x, y),
+        }
+    }
+}
+
+fn check_same_shape(op: &str, x: &Tensor, y: &Tensor) -> Result<()> {
+    if x.dims() != y.dims() {
+        bail!("{op}: shapes differ: prediction {:?} vs target {:?}", x.dims(), y.dims())
+    }
+    if x.dtype() != y.dtype() {
+        bail!("{op}: dtypes differ: prediction {:?} vs target {:?}", x.dtype(), y.dtype())
+    }
+    Ok(())
+}
+
+fn check_images(op: &str, x: &Tensor, y: &Tensor) -> Result<(usize, usize, usize, usize)> {
+    check_same_shape(op, x, y)?;
+    let dims = x.dims();
+    if dims.len() != 4 {
+        bail!("{op}: expected NCHW tensors, got prediction {:?} vs target {:?}", x.dims(), y.dims())
+    }
+    let (n, c, h, w) = (dims[0], dims[1], dims[2], dims[3]);
+    if h < SSIM_WINDOW || w < SSIM_WINDOW {
+        bail!("{op}: images of {h}x{w} are smaller than the {SSIM_WINDOW}x{SSIM_WINDOW} SSIM window")
+    }
+    Ok((n, c, h, w))
+}
+
+/// Mean absolute error.
+pub fn l1(x: &Tensor, y: &Tensor) -> Result<Tensor> {
+    check_same_shape("l1", x, y)?;
+    (x - y)?.abs()?.mean_all()
+}
+
+/// Mean squared error.
+pub fn mse(x: &Tensor, y: &Tensor) -> Result<Tensor> {
+    check_same_shape("mse", x, y)?;
+    (x - y)?.sqr()?.mean_all()
+}
+
+/// Mean SSIM over the batch and channels of two NCHW tensors (1 = identical). Works for a single image
+/// (N = 1), so the evaluation code uses it as a metric too.
+pub fn ssim(x: &Tensor, y: &Tensor) -> Result<Tensor> {
+    check_images("ssim", x, y)?;
+    let (ssim, _cs) = ssim_per_channel(x, y)?;
+    ssim.mean_all()
+}
+
+/// MS-SSIM with [`MS_SSIM_WEIGHTS`] (1 = identical); see the module docs for images too small for 5 scales.
+pub fn ms_ssim(x: &Tensor, y: &Tensor) -> Result<Tensor> {
+    ms_ssim_weighted(x, y, &MS_SSIM_WEIGHTS)
+}
+
+/// How many MS-SSIM scales fit an `h`×`w` image (at most `max_scales`; 0 if it is smaller than the window).
+pub fn ms_ssim_scales(h: usize, w: usize, max_scales: usize) -> usize {
+    let mut side = h.min(w);
+    let mut scales = 0;
+    while scales < max_scales && side >= SSIM_WINDOW {
+        scales += 1;
+        side /= 2;
+    }
+    scales
+}
+
+/// MS-SSIM with custom scale weights, finest first (OIDN's `RT` filter trains with `[0.2; 5]`). Only the
+/// weights of the scales that fit are used, renormalized to sum to 1.
+pub fn ms_ssim_weighted(x: &Tensor, y: &Tensor, weights: &[f64]) -> Result<Tensor> {
+    let (_, _, h, w) = check_images("ms_ssim", x, y)?;
+    if weights.is_empty() || weights.iter().any(|w| !(w.is_finite() && *w >= 0.0)) {
+        bail!("ms_ssim: weights must be a non-empty list of finite values >= 0, got {weights:?}")
+    }
+    let scales = ms_ssim_scales(h, w, weights.len());
+    let total: f64 = weights[..scales].iter().sum();
+    if total <= 0.0 {
+        bail!("ms_ssim: the weights of the {scales} scales that fit {h}x{w} sum to 0")
+    }
+    let (mut x, mut y) = (x.clone(), y.clone());
+    let mut product: Option<Tensor> = None;
+    for (level, &weight) in weights[..scales].iter().enumerate() {
+        let (ssim, cs) = ssim_per_channel(&x, &y)?;
+        let last = level + 1 == scales;
+        let term = relu_pow(if last { &ssim } else { &cs }, weight / total)?;
+        product = Some(match product {
+            None => term,
+            Some(p) => (p * term)?,
+        });
+        if !last {
+            x = x.avg_pool2d(2)?;
+            y = y.avg_pool2d(2)?;
+        }
+    }
+    product.expect("at least one scale").mean_all()
+}
+
+/// 0.16 · L1 + 0.84 · (1 − MS-SSIM).
+pub fn mix(x: &Tensor, y: &Tensor) -> Result<Tensor> {
+    check_images("mix", x, y)?;
+    let l1 = l1(x, y)?;
+    let ms = ms_ssim(x, y)?;
+    (l1 * MIX_L1_WEIGHT)? + (ms.affine(-1.0, 1.0)? * (1.0 - MIX_L1_WEIGHT))?
+}
+
+/// `max(v, 0)^e` with a finite gradient everywhere: `powf`'s gradient at 0 is infinite for e < 1, and
+/// candle's ReLU gradient is a multiplication by a 0/1 mask, which would turn it into NaN.
+fn relu_pow(v: &Tensor, e: f64) -> Result<Tensor> {
+    let positive = v.gt(0.0)?;
+    let safe = positive.where_cond(v, &v.ones_like()?)?;
+    positive.where_cond(&safe.powf(e)?, &v.zeros_like()?)
+}
+
+/// Per-image, per-channel SSIM and contrast-structure, each of shape (N, C).
+fn ssim_per_channel(x: &Tensor, y: &Tensor) -> Result<(Tensor, Tensor)> {
+    let (n, c, h, w) = x.dims4()?;
+    let b = n * c;
+    let x = x.reshape((b, 1, h, w))?;
+    let y = y.reshape((b, 1, h, w))?;
+    // A constant per image channel; see "Numerical stability" in the module docs.
+    let shift = ((x.mean_keepdim((2, 3))? + y.mean_keepdim((2, 3))?)? * 0.5)?.detach();
+    let xs = x.broadcast_sub(&shift)?;
+    let ys = y.broadcast_sub(&shift)?;
+    let stacked = Tensor::cat(&[&xs, &ys, &xs.sqr()?, &ys.sqr()?, &(&xs * &ys)?], 0)?;
+    let filtered = gaussian_filter(&stacked)?;
+    let mu1s = filtered.narrow(0, 0, b)?;
+    let mu2s = filtered.narrow(0, b, b)?;
+    let e_xx = filtered.narrow(0, 2 * b, b)?;
+    let e_yy = filtered.narrow(0, 3 * b, b)?;
+    let e_xy = filtered.narrow(0, 4 * b, b)?;
+    let mu1 = mu1s.broadcast_add(&shift)?;
+    let mu2 = mu2s.broadcast_add(&shift)?;
+    let sigma1_sq = (e_xx - mu1s.sqr()?)?;
+    let sigma2_sq = (e_yy - mu2s.sqr()?)?;
+    let sigma12 = (e_xy - (&mu1s * &mu2s)?)?;
+
+    let cs_map = (((sigma12 * 2.0)? + C2)? / ((sigma1_sq + sigma2_sq)? + C2)?)?;
+    let luminance = ((((&mu1 * &mu2)? * 2.0)? + C1)? / ((mu1.sqr()? + mu2.sqr()?)? + C1)?)?;
+    let ssim_map = (luminance * &cs_map)?;
+    let ssim = ssim_map.mean((1, 2, 3))?.reshape((n, c))?;
+    let cs = cs_map.mean((1, 2, 3))?.reshape((n, c))?;
+    Ok((ssim, cs))
+}
+
+/// The normalized 11-tap Gaussian (σ = 1.5), as OIDN's `_fspecial_gauss_1d`.
+fn gaussian_taps() -> [f32; SSIM_WINDOW] {
+    let half = (SSIM_WINDOW / 2) as f64;
+    let g: [f64; SSIM_WINDOW] =
+        std::array::from_fn(|i| (-((i as f64 - half).powi(2)) / (2.0 * SSIM_SIGMA * SSIM_SIGMA)).exp());
+    let sum: f64 = g.iter().sum();
+    g.map(|v| (v / sum) as f32)
+}
+
+/// Valid separable Gaussian filtering of a (B, 1, H, W) tensor → (B, 1, H − 10, W − 10).
+///
+/// On the CPU this is a custom op with direct loops and an explicit backward: candle's conv2d backward would
+/// also compute the (unneeded) kernel gradient, a convolution with an image-sized kernel whose im2col
+/// buffer takes gigabytes for a training batch. Elsewhere it is two conv2d calls.
+fn gaussian_filter(x: &Tensor) -> Result<Tensor> {
+    let x = x.contiguous()?;
+    if x.device().is_cpu() && matches!(x.dtype(), DType::F32) {
+        return x.apply_op1(GaussianValid);
+    }
+    let taps = Tensor::from_slice(&gaussian_taps(), SSIM_WINDOW, x.device())?.to_dtype(x.dtype())?;
+    let horizontal = taps.reshape((1, 1, 1, SSIM_WINDOW))?;
+    let vertical = taps.reshape((1, 1, SSIM_WINDOW, 1))?;
+    x.conv2d(&horizontal, 0, 1, 1, 1)?.conv2d(&vertical, 0, 1, 1, 1)
+}
+
+/// The CPU op behind [`gaussian_filter`]: valid correlation with the separable 11×11 Gaussian over the last
+/// two dimensions of a contiguous f32 tensor of rank ≥ 2.
+struct GaussianValid;
+
+impl CustomOp1 for GaussianValid {
+    fn name(&self) -> &'static str {
+        "hush-gaussian-valid"
+    }
+
+    fn cpu_fwd(&self, storage: &CpuStorage, layout: &Layout) -> Result<(CpuStorage, Shape)> {
+        let CpuStorage::F32(data) = storage else { bail!("{}: only f32 is supported", self.name()) };
+        let Some((start, end)) = layout.contiguous_offsets() else {
+            bail!("{}: input must be contiguous", self.name())
+        };
+        let data = &data[start..end];
+        let dims = layout.dims();
+        if dims.len() < 2 {
+            bail!("{}: input must have rank >= 2, got {dims:?}", self.name())
+        }
+        let (h, w) = (dims[dims.len() - 2], dims[dims.len() - 1]);
+        if h < SSIM_WINDOW || w < SSIM_WINDOW {
+            bail!("{}: {h}x{w} is smaller than the {SSIM_WINDOW}-tap window", self.name())
+        }
+        let (oh, ow) = (h + 1 - SSIM_WINDOW, w + 1 - SSIM_WINDOW);
+        let planes = data.len() / (h * w);
+        let taps = gaussian_taps();
+        let mut out = vec![0f32; planes * oh * ow];
+        let mut rows = vec![0f32; h * ow];
+        for (src, dst) in data.chunks_exact(h * w).zip(out.chunks_exact_mut(oh * ow)) {
+            // Horizontal pass into `rows` (h × ow), then vertical pass into `dst` (oh × ow).
+            for (row, tmp) in src.chunks_exact(w).zip(rows.chunks_exact_mut(ow)) {
+                tmp.fill(0.0);
+                for (k, &t) in taps.iter().enumerate() {
+                    for (o, &v) in tmp.iter_mut().zip(&row[k..k + ow]) {
+                        *o += t * v;
+                    }
+                }
+            }
+            for (y, out_row) in dst.chunks_exact_mut(ow).enumerate() {
+                for (k, &t) in taps.iter().enumerate() {
+                    let tmp = &rows[(y + k) * ow..][..ow];
+                    for (o, &v) in out_row.iter_mut().zip(tmp) {
+                        *o += t * v;
+                    }
+                }
+            }
+        }
+        let mut out_dims = dims.to_vec();
+        let n = out_dims.len();
+        out_dims[n - 2] = oh;
+        out_dims[n - 1] = ow;
+        Ok((CpuStorage::F32(out), Shape::from(out_dims)))
+    }
+
+    fn bwd(&self, _arg: &Tensor, _res: &Tensor, grad_res: &Tensor) -> Result<Option<Tensor>> {
+        // The adjoint of a valid correlation is a full correlation with the flipped kernel, i.e. a valid
+        // correlation of the zero-padded gradient; the Gaussian is symmetric, so the same op does it.
+        let r = grad_res.rank();
+        let pad = SSIM_WINDOW - 1;
+        let padded = grad_res.pad_with_zeros(r - 2, pad, pad)?.pad_with_zeros(r - 1, pad, pad)?;
+        Ok(Some(padded.contiguous()?.apply_op1(GaussianValid)?))
+    }
+}

@@ -1,0 +1,70 @@
+use hush_net::transfer::{Transfer, pu_forward};
+use hush_net::{Feature, Features, build_input, finish_color, prepare_color};
+
+#[test]
+fn features_parse_and_print() {
+    let f = Features::parse("diff,spec,nrm").unwrap();
+    assert_eq!(f.aux, vec![Feature::Diffuse, Feature::Specular, Feature::Normal]);
+    assert_eq!(f.in_channels(), 12);
+    assert_eq!(f.to_string(), "hdr,diff,spec,nrm");
+    assert_eq!(Features::parse(&f.to_string()).unwrap(), f);
+    assert_eq!(Features::parse("albedo, normal").unwrap().to_string(), "hdr,alb,nrm");
+    assert_eq!(Features::parse("").unwrap().in_channels(), 3);
+    assert!(Features::parse("alb,alb").unwrap_err().to_string().contains("twice"));
+    assert!(Features::parse("depth").unwrap_err().to_string().contains("depth"));
+    assert_eq!(serde_json::to_string(&f).unwrap(), r#"{"aux":["diffuse","specular","normal"]}"#);
+}
+
+/// OIDN's input processing: color × exposure → PU → ≤ 1; albedo-like clamped to [0, 1]; normals clamped
+/// to [-1, 1] and mapped to [0, 1]; NaN → 0. Channels: color, then the features in order.
+#[test]
+fn build_input_prepares_each_feature_like_oidn() {
+    let features = Features::new(vec![Feature::Normal, Feature::Diffuse]).unwrap();
+    // Two pixels (2×1).
+    let color = [1.0, f32::NAN, -3.0, 1e9, 0.5, 2.0];
+    let normal = [-1.0, 0.0, 1.0, 2.0, f32::NAN, -0.5];
+    let diffuse = [0.25, 1.5, -0.1, f32::NAN, 0.0, 1.0];
+    let x = build_input(&features, 2, 1, &color, &[&normal, &diffuse], 2.0, Transfer::Pu).unwrap();
+    assert_eq!(x.len(), 2 * 9);
+    let expected = [
+        pu_forward(2.0),
+        0.0,
+        0.0,
+        0.0,
+        0.5,
+        1.0,
+        0.25,
+        1.0,
+        0.0, // pixel 0
+        1.0,
+        pu_forward(1.0),
+        pu_forward(4.0),
+        1.0,
+        0.5,
+        0.25,
+        0.0,
+        0.0,
+        1.0, // pixel 1
+    ];
+    for (i, (a, b)) in x.iter().zip(&expected).enumerate() {
+        assert!((a - b).abs() < 1e-6, "channel {i}: {a} vs {b}");
+    }
+    let err = build_input(&features, 2, 1, &color, &[&normal], 2.0, Transfer::Pu).unwrap_err().to_string();
+    assert!(err.contains("1 auxiliary images"), "{err}");
+    let err = build_input(&features, 3, 1, &color, &[&normal, &diffuse], 2.0, Transfer::Pu).unwrap_err().to_string();
+    assert!(err.contains("color has 6 values"), "{err}");
+    assert!(build_input(&features, 2, 1, &color, &[&normal, &diffuse], 0.0, Transfer::Pu).is_err());
+}
+
+#[test]
+fn finish_color_inverts_prepare_color() {
+    let rgb = [0.0f32, 1e-4, 0.01, 0.5, 3.0, 1000.0];
+    for exposure in [0.05f32, 1.0, 7.0] {
+        let back = finish_color(&prepare_color(&rgb, exposure, Transfer::Pu), exposure, Transfer::Pu);
+        for (a, b) in rgb.iter().zip(&back) {
+            assert!((a - b).abs() <= 1e-4 * a.max(1e-3), "exposure {exposure}: {a} -> {b}");
+        }
+    }
+    // Negative network output is clamped to 0.
+    assert_eq!(finish_color(&[-0.5], 1.0, Transfer::Pu), vec![0.0]);
+}

@@ -1,0 +1,198 @@
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand};
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "hush",
+    version,
+    about = "Monte-Carlo denoising for your own renderer: render, dataset, train, denoise, eval"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Render a scene to a multi-layer EXR (beauty, albedo, diffuse, specular, normal).
+    Render(RenderArgs),
+    /// Render a dataset: several views of scenes, noisy images along an spp ladder, clean
+    /// auxiliary features and references.
+    Dataset(DatasetArgs),
+    /// Train a denoising U-Net on a dataset's training split.
+    Train(TrainArgs),
+    /// Denoise one image with a trained model.
+    Denoise(DenoiseArgs),
+    /// Evaluate models against the noisy input on a dataset's test split.
+    Eval(EvalArgs),
+}
+
+/// Camera and image overrides shared by `render` and `dataset`.
+#[derive(Args, Debug, Clone, Default)]
+pub struct ViewOverrides {
+    /// Image width in pixels (overrides the scene file).
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Image height in pixels (overrides the scene file).
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Vertical field of view in degrees (overrides the scene file).
+    #[arg(long)]
+    pub fov: Option<f32>,
+    /// Camera position x,y,z.
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub origin: Option<[f32; 3]>,
+    /// Point the camera looks at, x,y,z.
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub target: Option<[f32; 3]>,
+    /// Camera up vector x,y,z.
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub up: Option<[f32; 3]>,
+    /// Mitsuba's max_depth: 1 = emitters only, 2 = direct light, 8 = up to 7 bounces.
+    #[arg(long)]
+    pub max_depth: Option<u32>,
+}
+
+#[derive(Args, Debug)]
+pub struct RenderArgs {
+    /// Scene file (Mitsuba XML).
+    pub scene: PathBuf,
+    /// Samples per pixel.
+    #[arg(long)]
+    pub spp: u32,
+    /// Output EXR.
+    #[arg(long)]
+    pub out: PathBuf,
+    #[command(flatten)]
+    pub view: ViewOverrides,
+    /// Random seed: the same seed gives the same image.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Also write an 8-bit sRGB preview of the beauty image.
+    #[arg(long)]
+    pub png: Option<PathBuf>,
+    /// Write timing statistics (paths, wall and CPU seconds, adapter) as JSON.
+    #[arg(long)]
+    pub stats: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+pub struct DatasetArgs {
+    /// Scene files (Mitsuba XML).
+    #[arg(required = true)]
+    pub scenes: Vec<PathBuf>,
+    /// Output folder (created; re-running resumes and skips finished images).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Views per scene: view 0 is the scene's own camera, the others are jittered around it.
+    #[arg(long, default_value_t = 4)]
+    pub views: u32,
+    /// How many of each scene's views (the last ones) form the test split.
+    #[arg(long, default_value_t = 1)]
+    pub test_views: u32,
+    /// Noisy images per view, at these samples per pixel.
+    #[arg(long, value_delimiter = ',', default_value = "1,2,4,8,16")]
+    pub spp: Vec<u32>,
+    /// Samples per pixel of the reference (rendered with an independent seed).
+    #[arg(long, default_value_t = 1024)]
+    pub ref_spp: u32,
+    /// Samples per pixel of the clean auxiliary features.
+    #[arg(long, default_value_t = 64)]
+    pub aux_spp: u32,
+    /// Square image size in pixels (overrides the scene file).
+    #[arg(long)]
+    pub size: Option<u32>,
+    /// Seed of the view jitter and of every render.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+}
+
+#[derive(Args, Debug)]
+pub struct TrainArgs {
+    /// Dataset folder (from `hush dataset`).
+    #[arg(long)]
+    pub dataset: PathBuf,
+    /// Run folder: checkpoints, loss log, config and the final model.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Input features: `color`, `color,albedo,normal` or `color,diffuse,specular,normal`.
+    #[arg(long, default_value = "color,albedo,normal")]
+    pub features: String,
+    /// Noisy images of these spp are the training inputs (all of them if not given).
+    #[arg(long, value_delimiter = ',')]
+    pub spp: Vec<u32>,
+    /// Optimizer steps.
+    #[arg(long, default_value_t = 300)]
+    pub steps: usize,
+    /// Batch size.
+    #[arg(long, default_value_t = 4)]
+    pub batch: usize,
+    /// Square crop size (a multiple of 16).
+    #[arg(long, default_value_t = 64)]
+    pub crop: usize,
+    /// Width multiplier of OIDN's U-Net (1.0 = OIDN's widths).
+    #[arg(long, default_value_t = 0.25)]
+    pub width: f64,
+    /// Adam learning rate.
+    #[arg(long, default_value_t = 1e-3)]
+    pub lr: f64,
+    /// Loss: l1, mse or mix (0.16·L1 + 0.84·(1 − MS-SSIM)).
+    #[arg(long, default_value = "mix")]
+    pub loss: String,
+    /// Save a checkpoint every N steps.
+    #[arg(long, default_value_t = 100)]
+    pub checkpoint_every: usize,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+}
+
+#[derive(Args, Debug)]
+pub struct DenoiseArgs {
+    /// Trained model (.safetensors written by `hush train`).
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Noisy image: an RGB EXR, or a multi-layer EXR from `hush render` whose layers then
+    /// supply the auxiliary inputs.
+    #[arg(long)]
+    pub color: PathBuf,
+    #[arg(long)]
+    pub albedo: Option<PathBuf>,
+    #[arg(long)]
+    pub normal: Option<PathBuf>,
+    #[arg(long)]
+    pub diffuse: Option<PathBuf>,
+    #[arg(long)]
+    pub specular: Option<PathBuf>,
+    /// Output EXR (R,G,B).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+#[derive(Args, Debug)]
+pub struct EvalArgs {
+    /// Dataset folder (from `hush dataset`); its test split is evaluated.
+    #[arg(long)]
+    pub dataset: PathBuf,
+    /// Trained models to evaluate (.safetensors).
+    #[arg(long = "model")]
+    pub models: Vec<PathBuf>,
+    /// Noisy inputs at these spp (all stored ones if not given).
+    #[arg(long, value_delimiter = ',')]
+    pub spp: Vec<u32>,
+    /// Report folder: report.md, summary.json and PNG previews.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Denoise timing: median of this many warm runs.
+    #[arg(long, default_value_t = 3)]
+    pub timing_runs: usize,
+}
+
+fn parse_vec3(s: &str) -> Result<[f32; 3], String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    let nums: Result<Vec<f32>, _> = parts.iter().map(|p| p.parse::<f32>()).collect();
+    match nums {
+        Ok(v) if v.len() == 3 && v.iter().all(|x| x.is_finite()) => Ok([v[0], v[1], v[2]]),
+        _ => Err(format!("'{s}' is not three finite numbers x,y,z")),
+    }
+}

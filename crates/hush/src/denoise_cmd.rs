@@ -1,0 +1,61 @@
+use anyhow::{Context, Result, bail};
+use hush_dataset::{Image, read_exr, read_rgb, write_rgb};
+use hush_net::Feature;
+
+use crate::cli::DenoiseArgs;
+use crate::denoiser::Denoiser;
+
+/// The layer of a `hush render` EXR that holds a feature.
+fn layer_name(f: Feature) -> &'static str {
+    f.long_name()
+}
+
+pub fn run(args: DenoiseArgs) -> Result<()> {
+    let model = Denoiser::load(&args.model)?;
+    let exr = read_exr(&args.color)?;
+    let color = exr.layer("").with_context(|| format!("reading the color of {}", args.color.display()))?;
+    let mut aux: Vec<Image> = Vec::new();
+    for &f in model.features() {
+        let given = match f {
+            Feature::Albedo => &args.albedo,
+            Feature::Normal => &args.normal,
+            Feature::Diffuse => &args.diffuse,
+            Feature::Specular => &args.specular,
+        };
+        let image = match given {
+            Some(path) => read_rgb(path)?,
+            None if exr.channels.keys().any(|k| k.starts_with(&format!("{}.", layer_name(f)))) => {
+                exr.layer(layer_name(f))?
+            }
+            None => bail!(
+                "model {} needs --{} (its features are {}); {} has no '{}' layer either",
+                args.model.display(),
+                f.long_name(),
+                model.info.features,
+                args.color.display(),
+                layer_name(f)
+            ),
+        };
+        aux.push(image);
+    }
+    for (name, image) in
+        std::iter::once(("color", &color)).chain(model.features().iter().map(|f| f.long_name()).zip(&aux))
+    {
+        let bad = image.count_non_finite();
+        if bad > 0 {
+            eprintln!("warning: the {name} input holds {bad} NaN/Inf values; they are treated as 0");
+        }
+    }
+    let refs: Vec<&Image> = aux.iter().collect();
+    let start = std::time::Instant::now();
+    let out = model.denoise(&color, &refs)?;
+    eprintln!(
+        "denoised {}×{} in {:.3} s → {}",
+        color.width,
+        color.height,
+        start.elapsed().as_secs_f64(),
+        args.out.display()
+    );
+    write_rgb(&args.out, &out)?;
+    Ok(())
+}

@@ -1,0 +1,134 @@
+use anyhow::{Context, Result, bail};
+use glam::Vec3;
+use hush_dataset::{write_exr, write_png_preview};
+use hush_scene::Scene;
+use hush_trace::{GpuContext, RenderOutput, RenderSettings, Renderer};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use crate::cli::{RenderArgs, ViewOverrides};
+use crate::cpu::cpu_seconds;
+
+/// Loads a scene and applies the command line's overrides.
+pub fn load_scene(path: &std::path::Path, view: &ViewOverrides) -> Result<Scene> {
+    let mut scene = Scene::load(path)?;
+    if let Some(w) = view.width {
+        scene.film.width = w;
+    }
+    if let Some(h) = view.height {
+        scene.film.height = h;
+    }
+    if scene.film.width == 0 || scene.film.height == 0 {
+        bail!("--width and --height must be at least 1");
+    }
+    if let Some(f) = view.fov {
+        scene.camera.fov_y_deg = f;
+    }
+    if let Some(o) = view.origin {
+        scene.camera.origin = Vec3::from(o);
+    }
+    if let Some(t) = view.target {
+        scene.camera.target = Vec3::from(t);
+    }
+    if let Some(u) = view.up {
+        scene.camera.up = Vec3::from(u);
+    }
+    if let Some(d) = view.max_depth {
+        if d == 0 {
+            bail!("--max-depth must be at least 1 (1 = emitters seen directly)");
+        }
+        scene.max_depth = d;
+    }
+    scene.camera.validate().map_err(|m| anyhow::anyhow!("{}: {m}", path.display()))?;
+    Ok(scene)
+}
+
+/// Opens the GPU and says which adapter it is, so a fallback is never silent.
+pub fn open_gpu() -> Result<GpuContext> {
+    let gpu = GpuContext::new()?;
+    eprintln!("adapter: {}", gpu.describe());
+    Ok(gpu)
+}
+
+/// Renders with a progress bar (samples per pixel, paths per second, ETA).
+pub fn render_with_progress(
+    renderer: &Renderer,
+    scene: &Scene,
+    settings: &RenderSettings,
+    label: &str,
+) -> Result<RenderOutput> {
+    let bar = ProgressBar::new(settings.spp as u64);
+    bar.set_style(
+        ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} spp {msg} eta {eta}")
+            .expect("valid template")
+            .progress_chars("=> "),
+    );
+    bar.set_prefix(label.to_string());
+    let pixels = scene.film.width as f64 * scene.film.height as f64;
+    let start = std::time::Instant::now();
+    let out = renderer.render(scene, settings, &mut |done, _| {
+        let rate = pixels * done as f64 / start.elapsed().as_secs_f64().max(1e-9) / 1e6;
+        bar.set_message(format!("{rate:.2} M paths/s"));
+        bar.set_position(done as u64);
+    })?;
+    bar.finish_and_clear();
+    if out.discarded_samples > 0 {
+        eprintln!("warning: {label}: {} non-finite path samples were discarded", out.discarded_samples);
+    }
+    Ok(out)
+}
+
+pub fn run(args: RenderArgs) -> Result<()> {
+    if args.spp == 0 {
+        bail!("--spp must be at least 1");
+    }
+    let scene = load_scene(&args.scene, &args.view)?;
+    let gpu = open_gpu()?;
+    let renderer = Renderer::new(&gpu);
+    let cpu0 = cpu_seconds();
+    let out = render_with_progress(&renderer, &scene, &RenderSettings { spp: args.spp, seed: args.seed }, "render")?;
+    let cpu = cpu_seconds() - cpu0;
+    write_exr(
+        &args.out,
+        &[
+            ("", &out.color),
+            ("albedo", &out.albedo),
+            ("diffuse", &out.diffuse),
+            ("specular", &out.specular),
+            ("normal", &out.normal),
+        ],
+    )
+    .with_context(|| format!("writing {}", args.out.display()))?;
+    if let Some(png) = &args.png {
+        write_png_preview(png, &out.color, 1.0)?;
+    }
+    let paths = scene.film.width as f64 * scene.film.height as f64 * args.spp as f64;
+    eprintln!(
+        "{}×{} at {} spp in {:.2} s ({:.2} CPU-s): {:.3} M paths/s, {:.3} M paths per CPU-second → {}",
+        scene.film.width,
+        scene.film.height,
+        args.spp,
+        out.seconds,
+        cpu,
+        paths / out.seconds / 1e6,
+        paths / cpu / 1e6,
+        args.out.display()
+    );
+    if let Some(stats) = &args.stats {
+        let json = serde_json::json!({
+            "scene": args.scene,
+            "width": scene.film.width,
+            "height": scene.film.height,
+            "spp": args.spp,
+            "max_depth": scene.max_depth,
+            "paths": paths,
+            "wall_seconds": out.seconds,
+            "cpu_seconds": cpu,
+            "mpaths_per_second": paths / out.seconds / 1e6,
+            "mpaths_per_cpu_second": paths / cpu / 1e6,
+            "adapter": gpu.describe(),
+        });
+        hush_dataset::write_atomic(stats, |tmp| std::fs::write(tmp, serde_json::to_string_pretty(&json)?))
+            .with_context(|| format!("writing {}", stats.display()))?;
+    }
+    Ok(())
+}

@@ -1,0 +1,103 @@
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+pub type Result<T> = std::result::Result<T, String>;
+
+/// The repository root (this crate lives in `<root>/xtask`).
+pub fn project_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("xtask sits in the repository root").to_path_buf()
+}
+
+/// The cargo that runs us.
+fn cargo() -> String {
+    std::env::var("CARGO").unwrap_or_else(|_| "cargo".into())
+}
+
+/// The target directory cargo uses for this workspace.
+pub fn target_dir() -> PathBuf {
+    std::env::var_os("CARGO_TARGET_DIR").map(PathBuf::from).unwrap_or_else(|| project_root().join("target"))
+}
+
+/// Whether `--release` was passed.
+pub fn release(args: &[String]) -> bool {
+    args.iter().any(|a| a == "--release")
+}
+
+/// Builds the `hush` binary (the dev profile optimizes dependencies, so the tests' build is
+/// reused; `--release` builds with full optimization) and returns its path.
+pub fn build_hush(release: bool) -> Result<PathBuf> {
+    let mut cmd = Command::new(cargo());
+    cmd.current_dir(project_root()).args(["build", "--package", "hush"]);
+    if release {
+        cmd.arg("--release");
+    }
+    spawn(&mut cmd)?;
+    let exe = target_dir().join(if release { "release" } else { "debug" }).join("hush");
+    if !exe.is_file() {
+        return Err(format!("cargo built hush but {} is missing", exe.display()));
+    }
+    Ok(exe)
+}
+
+/// Runs a command, echoing it, and fails with its exit status.
+pub fn spawn(cmd: &mut Command) -> Result<()> {
+    let shown = format!(
+        "{} {}",
+        cmd.get_program().to_string_lossy(),
+        cmd.get_args().map(|a| a.to_string_lossy()).collect::<Vec<_>>().join(" ")
+    );
+    eprintln!("$ {shown}");
+    let start = Instant::now();
+    let status = cmd.status().map_err(|e| format!("cannot start `{shown}`: {e}"))?;
+    if !status.success() {
+        return Err(format!("`{shown}` failed ({status})"));
+    }
+    eprintln!("  ({:.1} s)", start.elapsed().as_secs_f64());
+    Ok(())
+}
+
+/// Makes sure a Vulkan driver is installed: lavapipe (Mesa's CPU Vulkan) on Debian when
+/// none is, with the one command that does it.
+pub fn ensure_vulkan() -> Result<()> {
+    let dirs = ["/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d"];
+    let has_icd = dirs.iter().any(|d| std::fs::read_dir(d).map(|mut r| r.next().is_some()).unwrap_or(false));
+    let has_loader = [
+        "/usr/lib/x86_64-linux-gnu/libvulkan.so.1",
+        "/usr/lib/aarch64-linux-gnu/libvulkan.so.1",
+        "/usr/lib/libvulkan.so.1",
+    ]
+    .iter()
+    .any(|p| Path::new(p).exists());
+    if has_icd && has_loader
+        || std::env::var_os("VK_DRIVER_FILES").is_some()
+        || std::env::var_os("VK_ICD_FILENAMES").is_some()
+    {
+        return Ok(());
+    }
+    const INSTALL: &str = "apt-get install -y libvulkan1 mesa-vulkan-drivers";
+    let root = Command::new("id").arg("-u").output().map(|o| o.stdout.starts_with(b"0")).unwrap_or(false);
+    if root && Path::new("/usr/bin/apt-get").exists() {
+        eprintln!("xtask: no Vulkan driver found; installing Mesa's CPU driver (lavapipe): {INSTALL}");
+        spawn(Command::new("apt-get").args(["update", "-qq"]))?;
+        return spawn(Command::new("apt-get").args(["install", "-y", "-qq", "libvulkan1", "mesa-vulkan-drivers"]));
+    }
+    Err(format!("no Vulkan driver found: install one, e.g. `sudo {INSTALL}` (Mesa's CPU driver, lavapipe)"))
+}
+
+/// Reads a JSON file written by `hush`.
+pub fn read_json(path: &Path) -> Result<serde_json::Value> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// Writes a JSON file (temp + rename).
+pub fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    }
+    let tmp = path.with_extension("json.tmp");
+    let text = serde_json::to_string_pretty(value).expect("JSON values serialize");
+    std::fs::write(&tmp, text).map_err(|e| format!("{}: {e}", tmp.display()))?;
+    std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
+}
