@@ -129,3 +129,100 @@ fn render_writes_every_layer() {
     let stats: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
     assert_eq!(stats["paths"].as_f64(), Some(24.0 * 16.0 * 2.0));
 }
+
+/// The whole pipeline on a 32² Cornell box: dataset (re-run resumes without re-rendering),
+/// train, denoise (with a clear error for a missing feature), eval.
+#[test]
+fn pipeline_runs_end_to_end() {
+    let dir = scratch("pipeline");
+    let ds = dir.join("ds");
+    let run = dir.join("run");
+    let scene = cbox();
+    let dataset_args = [
+        "dataset",
+        s(&scene),
+        "--out",
+        s(&ds),
+        "--views",
+        "2",
+        "--test-views",
+        "1",
+        "--spp",
+        "2",
+        "--ref-spp",
+        "16",
+        "--aux-spp",
+        "4",
+        "--size",
+        "32",
+        "--seed",
+        "3",
+    ];
+    expect_success(&dataset_args);
+    let manifest = std::fs::read_to_string(ds.join("manifest.json")).unwrap();
+    expect_success(&dataset_args);
+    assert_eq!(
+        manifest,
+        std::fs::read_to_string(ds.join("manifest.json")).unwrap(),
+        "a re-run must reuse every finished render"
+    );
+
+    expect_success(&[
+        "train",
+        "--dataset",
+        s(&ds),
+        "--out",
+        s(&run),
+        "--steps",
+        "3",
+        "--batch",
+        "2",
+        "--crop",
+        "32",
+        "--width",
+        "0.125",
+        "--checkpoint-every",
+        "2",
+    ]);
+    assert!(run.join("model.safetensors").is_file() && run.join("config.json").is_file());
+    assert!(run.join("checkpoints/step_000002.safetensors").is_file());
+    let log = std::fs::read_to_string(run.join("loss.csv")).unwrap();
+    assert_eq!(log.lines().count(), 4, "header and three steps:\n{log}");
+
+    let model = run.join("model.safetensors");
+    let out = dir.join("denoised.exr");
+    expect_success(&[
+        "denoise",
+        "--model",
+        s(&model),
+        "--color",
+        s(&ds.join("cbox_v001_000002.hdr.exr")),
+        "--albedo",
+        s(&ds.join("cbox_v001_ref.alb.exr")),
+        "--normal",
+        s(&ds.join("cbox_v001_ref.nrm.exr")),
+        "--out",
+        s(&out),
+    ]);
+    let denoised = hush_dataset::read_rgb(&out).unwrap();
+    assert_eq!((denoised.width, denoised.height, denoised.count_non_finite()), (32, 32, 0));
+    let err = expect_error(&[
+        "denoise",
+        "--model",
+        s(&model),
+        "--color",
+        s(&ds.join("cbox_v001_000002.hdr.exr")),
+        "--out",
+        s(&out),
+    ]);
+    assert!(err.contains("--albedo"), "{err}");
+
+    let report = dir.join("report");
+    expect_success(&["eval", "--dataset", s(&ds), "--model", s(&model), "--out", s(&report), "--timing-runs", "1"]);
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(report.join("summary.json")).unwrap()).unwrap();
+    let methods: Vec<&str> =
+        summary["rows"].as_array().unwrap().iter().map(|r| r["method"].as_str().unwrap()).collect();
+    assert!(methods.contains(&"noisy") && methods.contains(&"run/model"), "{methods:?}");
+    assert!(report.join("report.md").is_file());
+}

@@ -32,7 +32,7 @@ pub fn run(args: &[String]) -> Result<()> {
             .arg(&dataset)
             .arg("--out")
             .arg(&run_dir)
-            .args(["--features", "color,albedo,normal", "--spp", "4,16", "--steps", "400"])
+            .args(["--features", "color,albedo,normal", "--spp", "4,16", "--steps", "1000"])
             .args(["--batch", "4", "--crop", "64", "--width", "0.25", "--lr", "1e-3", "--loss", "mix", "--seed", "1"]),
     )?;
     spawn(
