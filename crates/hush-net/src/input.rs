@@ -1,10 +1,19 @@
 //! What the network sees: noisy HDR color plus auxiliary features, prepared as Open Image Denoise does.
 //!
-//! Per pixel, as OIDN's `core/input_process_kernel.h` and `training/dataset.py`:
-//! * color (and the training target): NaN → 0, clamped to ≥ 0, × exposure, then the transfer function,
-//!   then clamped to ≤ 1 (OIDN's `preprocess.py` clamps the transferred color and target to ≤ 1);
-//! * albedo-like features (albedo, diffuse, specular reflectance): NaN → 0, clamped to [0, 1];
-//! * normals: NaN → 0, clamped to [-1, 1], then mapped to [0, 1] by `n · 0.5 + 0.5`.
+//! Per pixel, as OIDN's `core/input_process_kernel.h` (runtime) and `training/dataset.py` (training):
+//! * color: sanitized (below), × exposure, then the transfer function. For **training** ([`build_input`],
+//!   [`prepare_color`], also the target) the result is clamped to ≤ 1, as OIDN's `preprocess.py` clamps the
+//!   transferred color and target. For **inference** ([`build_inference_input`]) it is not: OIDN's runtime
+//!   clamps only to [0, FLT_MAX] before the transfer, so radiance above 65504 / exposure reaches the
+//!   network as values > 1, and hush must do the same to reproduce OIDN's output with OIDN's weights;
+//! * albedo-like features (albedo, diffuse, specular reflectance): sanitized, clamped to [0, 1];
+//! * normals: sanitized, clamped to [-1, 1], then mapped to [0, 1] by `n · 0.5 + 0.5`.
+//!
+//! **Non-finite input** (the sanitization policy): NaN, +Inf and −Inf samples become 0, as do negative
+//! color samples, in every feature, before anything else; [`crate::transfer::autoexposure`] ignores them
+//! the same way. A broken sample thus costs one dark sample, never the image: OIDN 2.5.1 treats NaN, −Inf
+//! and negatives so too, but lets +Inf through its autoexposure, which then returns 0 and the whole output
+//! turns black. hush deliberately departs from OIDN there; finite input is processed exactly like OIDN.
 //!
 //! Channel order: color first, then the auxiliary features in the order of [`Features::aux`], 3 each.
 
@@ -57,7 +66,7 @@ impl Feature {
 
     /// The network's view of one feature sample.
     fn prepare(self, v: f32) -> f32 {
-        let v = if v.is_nan() { 0.0 } else { v };
+        let v = sanitize(v);
         match self {
             Feature::Normal => v.clamp(-1.0, 1.0) * 0.5 + 0.5,
             Feature::Albedo | Feature::Diffuse | Feature::Specular => v.clamp(0.0, 1.0),
@@ -113,17 +122,25 @@ impl std::fmt::Display for Features {
     }
 }
 
-/// Color (or target) radiance as the network sees it: `min(1, transfer(exposure · max(0, v)))`, NaN → 0.
-pub fn prepare_color(rgb: &[f32], exposure: f32, transfer: Transfer) -> Vec<f32> {
-    rgb.iter()
-        .map(|&v| {
-            let v = if v.is_nan() { 0.0 } else { v.max(0.0) };
-            transfer.forward(v * exposure).min(1.0)
-        })
-        .collect()
+/// The sanitization policy of the module docs: non-finite samples become 0.
+fn sanitize(v: f32) -> f32 {
+    if v.is_finite() { v } else { 0.0 }
 }
 
-/// The inverse of [`prepare_color`] for network output: clamp ≥ 0, inverse transfer, ÷ exposure.
+/// Color radiance for the network without the ≤ 1 clamp: `transfer(min(FLT_MAX, exposure · max(0, v)))`,
+/// OIDN's runtime (whose clamp after the scaling keeps huge finite values finite).
+fn prepare_color_unclamped(v: f32, exposure: f32, transfer: Transfer) -> f32 {
+    transfer.forward((sanitize(v).max(0.0) * exposure).min(f32::MAX))
+}
+
+/// Color (or target) radiance as the network sees it in training: `min(1, transfer(exposure · max(0, v)))`,
+/// non-finite → 0.
+pub fn prepare_color(rgb: &[f32], exposure: f32, transfer: Transfer) -> Vec<f32> {
+    rgb.iter().map(|&v| prepare_color_unclamped(v, exposure, transfer).min(1.0)).collect()
+}
+
+/// The inverse of [`prepare_color`] for network output, as OIDN's `core/output_process_kernel.h`: NaN → 0,
+/// clamp ≥ 0, inverse transfer, ÷ exposure.
 pub fn finish_color(out: &[f32], exposure: f32, transfer: Transfer) -> Vec<f32> {
     out.iter()
         .map(|&v| {
@@ -133,11 +150,47 @@ pub fn finish_color(out: &[f32], exposure: f32, transfer: Transfer) -> Vec<f32> 
         .collect()
 }
 
-/// Builds the interleaved (HWC) network input from linear color and the auxiliary images listed in
-/// `features` (same order), each interleaved RGB/XYZ of `width × height × 3` values. `exposure` is usually
-/// [`crate::transfer::autoexposure`] of the color (at inference) or of the reference (in training, as
-/// OIDN's `preprocess.py` does, so input and target share it).
+/// Which color clamp an input is built with (see the module docs).
+#[derive(Clone, Copy)]
+enum Stage {
+    Training,
+    Inference,
+}
+
+/// Builds the interleaved (HWC) network input **for training** from linear color and the auxiliary images
+/// listed in `features` (same order), each interleaved RGB/XYZ of `width × height × 3` values. `exposure` is
+/// that of the reference (as OIDN's `preprocess.py` does, so input and target share it). The transferred
+/// color is clamped to ≤ 1; use [`build_inference_input`] to denoise.
 pub fn build_input(
+    features: &Features,
+    width: usize,
+    height: usize,
+    color: &[f32],
+    aux: &[&[f32]],
+    exposure: f32,
+    transfer: Transfer,
+) -> Result<Vec<f32>> {
+    build(Stage::Training, features, width, height, color, aux, exposure, transfer)
+}
+
+/// Builds the interleaved (HWC) network input **for denoising**, exactly as OIDN's runtime does
+/// (`core/input_process_kernel.h`): like [`build_input`] but the transferred color is not clamped to ≤ 1.
+/// `exposure` is usually [`crate::transfer::autoexposure`] of the color (OIDN's `inputScale`).
+pub fn build_inference_input(
+    features: &Features,
+    width: usize,
+    height: usize,
+    color: &[f32],
+    aux: &[&[f32]],
+    exposure: f32,
+    transfer: Transfer,
+) -> Result<Vec<f32>> {
+    build(Stage::Inference, features, width, height, color, aux, exposure, transfer)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn build(
+    stage: Stage,
     features: &Features,
     width: usize,
     height: usize,
@@ -162,7 +215,10 @@ pub fn build_input(
         bail!("build_input: exposure must be finite and > 0, got {exposure}")
     }
     let channels = features.in_channels();
-    let color = prepare_color(color, exposure, transfer);
+    let color: Vec<f32> = match stage {
+        Stage::Training => prepare_color(color, exposure, transfer),
+        Stage::Inference => color.iter().map(|&v| prepare_color_unclamped(v, exposure, transfer)).collect(),
+    };
     let mut out = Vec::with_capacity(width * height * channels);
     for p in 0..width * height {
         out.extend_from_slice(&color[3 * p..3 * p + 3]);

@@ -1,15 +1,19 @@
 //! Candle U-Nets, losses and HDR transfer functions for Monte-Carlo denoising. No file I/O.
 //!
-//! * [`UNet`] / [`UNetConfig`]: Open Image Denoise's `unet` (same layer names, so the safetensors keys are
-//!   OIDN's: `enc_conv0.weight`, ..., `dec_conv0.bias`), with a width multiplier. NCHW f32.
+//! * [`UNet`] / [`UNetConfig`]: Open Image Denoise's `unet`, `unet_small` and `unet_large`, and the thesis'
+//!   autoencoder without skips ([`UNetKind`]), with OIDN's layer names as weight keys (`enc_conv0.weight`,
+//!   ..., `dec_conv0.bias`) and a width multiplier (the thesis' M1/M2 capacities). NCHW f32.
 //!   [`init_weights`] gives a reproducible initialization (candle's CPU generator cannot be seeded).
 //! * [`loss`]: L1, MSE, SSIM, MS-SSIM and the thesis' mix 0.16·L1 + 0.84·(1 − MS-SSIM); `ssim` doubles as
 //!   the evaluation metric.
 //! * [`transfer`]: autoexposure and the PU / log / sRGB transfer functions, on values and tensors.
-//! * [`build_input`] / [`prepare_color`] / [`finish_color`]: the network's input and output, as OIDN
-//!   prepares them ([`Features`] says which auxiliary images go in, in which order).
+//! * [`denoise`]: one image through OIDN's whole inference path (autoexposure, input, network, output).
+//! * [`build_input`] (training) / [`build_inference_input`] (denoising) / [`prepare_color`] /
+//!   [`finish_color`]: the network's input and output, as OIDN prepares them ([`Features`] says which auxiliary images go in, in which order).
 //! * [`save_weights`] / [`load_weights`] / [`load_model`] / [`read_metadata`]: safetensors bytes carrying a
 //!   [`ModelInfo`] (network, features, transfer) as metadata. Reading and writing files is the caller's job.
+//! * [`load_tza`] / [`export_tza`] / [`parse_tza`] / [`write_tza`]: OIDN's Tensor Archive format, so hush runs
+//!   OIDN's official weights and OIDN runs hush's.
 //!
 //! Device-agnostic: everything takes the device from its inputs or a `&Device`.
 //!
@@ -36,13 +40,20 @@
 //! # }
 //! ```
 
+mod denoise;
 mod input;
 pub mod loss;
 pub mod transfer;
+mod tza;
 mod unet;
 mod weights;
 
-pub use input::{Feature, Features, build_input, finish_color, prepare_color};
+pub use denoise::denoise;
+pub use input::{Feature, Features, build_inference_input, build_input, finish_color, prepare_color};
 pub use loss::Loss;
-pub use unet::{ALIGNMENT, UNet, UNetConfig, UNetKind, crop, hwc_to_nchw, init_weights, nchw_to_hwc, pad_to_multiple};
+pub use tza::{TzaTensor, export_tza, infer_config, load_tza, oidn_features, parse_tza, write_tza};
+pub use unet::{
+    ALIGNMENT, ConvShape, THESIS_M1_WIDTH, THESIS_M2_WIDTH, UNet, UNetConfig, UNetKind, crop, hwc_to_nchw,
+    init_weights, nchw_to_hwc, pad_to_multiple,
+};
 pub use weights::{METADATA_KEY, ModelInfo, load_model, load_weights, read_metadata, save_weights};

@@ -1,4 +1,5 @@
-//! Open Image Denoise's `unet`, layer for layer, with a width multiplier.
+//! Open Image Denoise's U-Nets (`unet`, `unet_small`, `unet_large`) and the thesis' autoencoder without skip
+//! connections, layer for layer, with a width multiplier.
 
 use candle_core::{CpuStorage, CustomOp2, DType, Device, Layout, Module, Result, Shape, Tensor, bail};
 use candle_nn::{VarBuilder, VarMap};
@@ -7,12 +8,114 @@ use serde::{Deserialize, Serialize};
 /// Input height and width must be multiples of this (four 2×2 poolings).
 pub const ALIGNMENT: usize = 16;
 
-/// Which network. Only OIDN's default `unet` exists so far; `unet_small`/`unet_large` may follow.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+/// Which network. The layer names are OIDN's (`training/model.py`), so they are the weight keys of both
+/// safetensors and TZA files.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum UNetKind {
-    /// OIDN's `unet`: encoder 32, 48, 64, 80, 96; decoder 112, 96, 64/64, 64/32.
+    /// OIDN's `unet`: encoder 32, 48, 64, 80, 96; decoder 112, 96, 64/64, 64/32; output `dec_conv0`.
     Unet,
+    /// OIDN's `unet_small`: encoder 32 throughout; decoder 64, 64, 64/32, 32/32; output `dec_conv0`.
+    UnetSmall,
+    /// OIDN's `unet_large`: two convolutions per encoder level (`enc_conv1a`, `enc_conv1b`, ...), widths
+    /// 64, 96, 128, 192, 256; decoder 192, 128, 96, 64, and `dec_conv1c` as the output layer.
+    UnetLarge,
+    /// The thesis' M_DAE (§7.5.2): `unet` without its skip connections, a classical convolutional
+    /// autoencoder (the decoder sees only the upsampled features).
+    Autoencoder,
+}
+
+impl UNetKind {
+    pub const ALL: [UNetKind; 4] = [UNetKind::Unet, UNetKind::UnetSmall, UNetKind::UnetLarge, UNetKind::Autoencoder];
+
+    /// The serialized name: `unet`, `unet_small`, `unet_large`, `autoencoder`.
+    pub fn name(self) -> &'static str {
+        match self {
+            UNetKind::Unet => "unet",
+            UNetKind::UnetSmall => "unet_small",
+            UNetKind::UnetLarge => "unet_large",
+            UNetKind::Autoencoder => "autoencoder",
+        }
+    }
+
+    /// Parses [`UNetKind::name`].
+    pub fn parse(name: &str) -> Option<UNetKind> {
+        UNetKind::ALL.into_iter().find(|k| k.name() == name)
+    }
+
+    /// The layers at full width: per encoder level (the last one is the bottleneck), per decoder level
+    /// (coarsest first), the base output width of each convolution; then the output layer's name.
+    fn plan(self) -> Plan {
+        type L = &'static [(&'static str, usize)];
+        const UNET_ENC: [L; 5] = [
+            &[("enc_conv0", 32), ("enc_conv1", 32)],
+            &[("enc_conv2", 48)],
+            &[("enc_conv3", 64)],
+            &[("enc_conv4", 80)],
+            &[("enc_conv5a", 96), ("enc_conv5b", 96)],
+        ];
+        const UNET_DEC: [L; 4] = [
+            &[("dec_conv4a", 112), ("dec_conv4b", 112)],
+            &[("dec_conv3a", 96), ("dec_conv3b", 96)],
+            &[("dec_conv2a", 64), ("dec_conv2b", 64)],
+            &[("dec_conv1a", 64), ("dec_conv1b", 32)],
+        ];
+        match self {
+            UNetKind::Unet => Plan { enc: UNET_ENC, dec: UNET_DEC, out: "dec_conv0", skips: true },
+            UNetKind::Autoencoder => Plan { enc: UNET_ENC, dec: UNET_DEC, out: "dec_conv0", skips: false },
+            UNetKind::UnetSmall => Plan {
+                enc: [
+                    &[("enc_conv0", 32), ("enc_conv1", 32)],
+                    &[("enc_conv2", 32)],
+                    &[("enc_conv3", 32)],
+                    &[("enc_conv4", 32)],
+                    &[("enc_conv5a", 32), ("enc_conv5b", 32)],
+                ],
+                dec: [
+                    &[("dec_conv4a", 64), ("dec_conv4b", 64)],
+                    &[("dec_conv3a", 64), ("dec_conv3b", 64)],
+                    &[("dec_conv2a", 64), ("dec_conv2b", 32)],
+                    &[("dec_conv1a", 32), ("dec_conv1b", 32)],
+                ],
+                out: "dec_conv0",
+                skips: true,
+            },
+            UNetKind::UnetLarge => Plan {
+                enc: [
+                    &[("enc_conv1a", 64), ("enc_conv1b", 64)],
+                    &[("enc_conv2a", 96), ("enc_conv2b", 96)],
+                    &[("enc_conv3a", 128), ("enc_conv3b", 128)],
+                    &[("enc_conv4a", 192), ("enc_conv4b", 192)],
+                    &[("enc_conv5a", 256), ("enc_conv5b", 256)],
+                ],
+                dec: [
+                    &[("dec_conv4a", 192), ("dec_conv4b", 192)],
+                    &[("dec_conv3a", 128), ("dec_conv3b", 128)],
+                    &[("dec_conv2a", 96), ("dec_conv2b", 96)],
+                    &[("dec_conv1a", 64), ("dec_conv1b", 64)],
+                ],
+                out: "dec_conv1c",
+                skips: true,
+            },
+        }
+    }
+}
+
+/// The layer table of one kind (see [`UNetKind::plan`]).
+struct Plan {
+    enc: [&'static [(&'static str, usize)]; 5],
+    dec: [&'static [(&'static str, usize)]; 4],
+    out: &'static str,
+    skips: bool,
+}
+
+/// One 3×3 convolution of a network: OIDN's layer name and its channels. Its tensors are
+/// `<name>.weight` (`out × in × 3 × 3`, OIHW) and `<name>.bias` (`out`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ConvShape {
+    pub name: &'static str,
+    pub in_channels: usize,
+    pub out_channels: usize,
 }
 
 /// The shape of a [`UNet`].
@@ -23,15 +126,36 @@ pub struct UNetConfig {
     pub in_channels: usize,
     /// Channels of the output tensor (3 for RGB).
     pub out_channels: usize,
-    /// Multiplier on every hidden layer width: `max(1, round(base × width))`, rounding halves away from
-    /// zero (`f64::round`). 1.0 is OIDN's network; the thesis also tried 0.66 and 0.5.
+    /// Multiplier on every hidden layer width: `max(1, ⌊base × width⌋)`, the thesis' rule (eq. 7.2,
+    /// `c1 = ⌊c·0.66⌋`). 1.0 is OIDN's network; see [`UNetConfig::thesis_m1`] and [`UNetConfig::thesis_m2`].
     pub width: f64,
 }
+
+/// The thesis' M1 capacity (§7.5.2, eq. 7.2): every width `⌊c·0.66⌋`.
+pub const THESIS_M1_WIDTH: f64 = 0.66;
+/// The thesis' M2 capacity (eq. 7.3): `⌊c1·0.5⌋` with `c1` of M1, which for every base width of these
+/// networks equals `⌊c·0.33⌋` (a unit test checks each).
+pub const THESIS_M2_WIDTH: f64 = 0.33;
 
 impl UNetConfig {
     /// OIDN's `unet` at full width with 3 output channels.
     pub fn oidn(in_channels: usize) -> Self {
         UNetConfig { kind: UNetKind::Unet, in_channels, out_channels: 3, width: 1.0 }
+    }
+
+    /// The thesis' M1: OIDN's `unet` with every hidden width `⌊c·0.66⌋`.
+    pub fn thesis_m1(in_channels: usize) -> Self {
+        UNetConfig { width: THESIS_M1_WIDTH, ..UNetConfig::oidn(in_channels) }
+    }
+
+    /// The thesis' M2: OIDN's `unet` with every hidden width `⌊⌊c·0.66⌋·0.5⌋`.
+    pub fn thesis_m2(in_channels: usize) -> Self {
+        UNetConfig { width: THESIS_M2_WIDTH, ..UNetConfig::oidn(in_channels) }
+    }
+
+    /// The thesis' M_DAE: OIDN's `unet` without skip connections, full width.
+    pub fn thesis_dae(in_channels: usize) -> Self {
+        UNetConfig { kind: UNetKind::Autoencoder, ..UNetConfig::oidn(in_channels) }
     }
 
     /// Checks the fields; [`UNet::new`] calls it.
@@ -45,10 +169,46 @@ impl UNetConfig {
         Ok(())
     }
 
-    /// The hidden widths after scaling: `[ec1, ec2, ec3, ec4, ec5, dc4, dc3, dc2a, dc2b, dc1a, dc1b]`.
-    pub fn widths(&self) -> [usize; 11] {
-        const BASE: [usize; 11] = [32, 48, 64, 80, 96, 112, 96, 64, 64, 64, 32];
-        BASE.map(|b| ((b as f64 * self.width).round() as usize).max(1))
+    /// A hidden width after scaling: `max(1, ⌊base × width⌋)`. The tiny epsilon keeps products that are
+    /// integers in exact arithmetic (0.1 × 80) from rounding down to the integer below.
+    fn scaled(&self, base: usize) -> usize {
+        ((base as f64 * self.width + 1e-9).floor() as usize).max(1)
+    }
+
+    /// Every convolution in the order the network applies them (encoder, decoder, output layer), which is
+    /// also the order of OIDN's weight files.
+    pub fn conv_shapes(&self) -> Vec<ConvShape> {
+        let plan = self.kind.plan();
+        let mut shapes = Vec::new();
+        let mut c = self.in_channels;
+        // Channels of the skip tensors: the input, then each pooled encoder level (pool1, pool2, pool3).
+        let mut skips = vec![self.in_channels];
+        for (level, layers) in plan.enc.iter().enumerate() {
+            for &(name, base) in layers.iter() {
+                let out = self.scaled(base);
+                shapes.push(ConvShape { name, in_channels: c, out_channels: out });
+                c = out;
+            }
+            if level < 3 {
+                skips.push(c);
+            }
+        }
+        for layers in plan.dec.iter() {
+            let skip = skips.pop().expect("one skip per decoder level");
+            for (i, &(name, base)) in layers.iter().enumerate() {
+                let out = self.scaled(base);
+                let in_channels = if i == 0 && plan.skips { c + skip } else { c };
+                shapes.push(ConvShape { name, in_channels, out_channels: out });
+                c = out;
+            }
+        }
+        shapes.push(ConvShape { name: plan.out, in_channels: c, out_channels: self.out_channels });
+        shapes
+    }
+
+    /// The number of weights and biases.
+    pub fn parameter_count(&self) -> usize {
+        self.conv_shapes().iter().map(|s| s.out_channels * (s.in_channels * 9 + 1)).sum()
     }
 }
 
@@ -56,19 +216,22 @@ impl UNetConfig {
 /// `<name>.bias`.
 #[derive(Clone, Debug)]
 struct Conv3x3 {
+    name: &'static str,
     weight: Tensor,
     bias: Tensor,
 }
 
 impl Conv3x3 {
-    fn new(vb: VarBuilder, in_c: usize, out_c: usize) -> Result<Self> {
+    fn new(vb: &VarBuilder, shape: &ConvShape) -> Result<Self> {
+        let vb = vb.pp(shape.name);
+        let (in_c, out_c) = (shape.in_channels, shape.out_channels);
         // PyTorch's default initialisation of nn.Conv2d (kaiming_uniform with a = sqrt(5)) is
         // U(-1/sqrt(fan_in), 1/sqrt(fan_in)) for both weight and bias, which is what OIDN trains from.
         let bound = 1.0 / ((in_c * 9) as f64).sqrt();
         let init = candle_nn::Init::Uniform { lo: -bound, up: bound };
         let weight = vb.get_with_hints((out_c, in_c, 3, 3), "weight", init)?;
         let bias = vb.get_with_hints(out_c, "bias", init)?;
-        Ok(Conv3x3 { weight, bias })
+        Ok(Conv3x3 { name: shape.name, weight, bias })
     }
 
     fn forward(&self, x: &Tensor) -> Result<Tensor> {
@@ -82,28 +245,19 @@ impl Conv3x3 {
     }
 }
 
-/// OIDN's U-Net (`training/model.py`, `UNet`): 3×3 convolutions + ReLU, 2×2 max pooling, nearest ×2
-/// upsampling, skip connections by channel concatenation `[upsampled, skip]`, no activation after
-/// `dec_conv0`. Input and output are NCHW; see [`UNet::forward_padded`] for arbitrary sizes.
+/// OIDN's U-Nets (`training/model.py`, `UNet`, `UNetSmall`, `UNetLarge`): 3×3 convolutions + ReLU, 2×2 max
+/// pooling, nearest ×2 upsampling, skip connections by channel concatenation `[upsampled, skip]` (the
+/// pooled encoder levels 3, 2, 1 and the input), no activation after the output layer. Input and output are
+/// NCHW; see [`UNet::forward_padded`] for arbitrary sizes.
 #[derive(Clone, Debug)]
 pub struct UNet {
     cfg: UNetConfig,
-    enc_conv0: Conv3x3,
-    enc_conv1: Conv3x3,
-    enc_conv2: Conv3x3,
-    enc_conv3: Conv3x3,
-    enc_conv4: Conv3x3,
-    enc_conv5a: Conv3x3,
-    enc_conv5b: Conv3x3,
-    dec_conv4a: Conv3x3,
-    dec_conv4b: Conv3x3,
-    dec_conv3a: Conv3x3,
-    dec_conv3b: Conv3x3,
-    dec_conv2a: Conv3x3,
-    dec_conv2b: Conv3x3,
-    dec_conv1a: Conv3x3,
-    dec_conv1b: Conv3x3,
-    dec_conv0: Conv3x3,
+    /// Per encoder level; levels 0–3 end in a 2×2 max pooling, level 4 is the bottleneck.
+    enc: Vec<Vec<Conv3x3>>,
+    /// Per decoder level, coarsest first; each starts with an upsampling (and a concatenation).
+    dec: Vec<Vec<Conv3x3>>,
+    out: Conv3x3,
+    skips: bool,
 }
 
 impl UNet {
@@ -111,38 +265,42 @@ impl UNet {
     /// `enc_conv0.weight`, `enc_conv0.bias`, ... under `vb`'s prefix.
     pub fn new(vb: VarBuilder, cfg: &UNetConfig) -> Result<Self> {
         cfg.validate()?;
-        let UNetKind::Unet = cfg.kind;
-        let ic = cfg.in_channels;
-        let oc = cfg.out_channels;
-        let [ec1, ec2, ec3, ec4, ec5, dc4, dc3, dc2a, dc2b, dc1a, dc1b] = cfg.widths();
-        let conv = |name: &str, i, o| Conv3x3::new(vb.pp(name), i, o);
-        Ok(UNet {
-            cfg: cfg.clone(),
-            enc_conv0: conv("enc_conv0", ic, ec1)?,
-            enc_conv1: conv("enc_conv1", ec1, ec1)?,
-            enc_conv2: conv("enc_conv2", ec1, ec2)?,
-            enc_conv3: conv("enc_conv3", ec2, ec3)?,
-            enc_conv4: conv("enc_conv4", ec3, ec4)?,
-            enc_conv5a: conv("enc_conv5a", ec4, ec5)?,
-            enc_conv5b: conv("enc_conv5b", ec5, ec5)?,
-            dec_conv4a: conv("dec_conv4a", ec5 + ec3, dc4)?,
-            dec_conv4b: conv("dec_conv4b", dc4, dc4)?,
-            dec_conv3a: conv("dec_conv3a", dc4 + ec2, dc3)?,
-            dec_conv3b: conv("dec_conv3b", dc3, dc3)?,
-            dec_conv2a: conv("dec_conv2a", dc3 + ec1, dc2a)?,
-            dec_conv2b: conv("dec_conv2b", dc2a, dc2b)?,
-            dec_conv1a: conv("dec_conv1a", dc2b + ic, dc1a)?,
-            dec_conv1b: conv("dec_conv1b", dc1a, dc1b)?,
-            dec_conv0: conv("dec_conv0", dc1b, oc)?,
-        })
+        let plan = cfg.kind.plan();
+        let shapes = cfg.conv_shapes();
+        let mut convs = shapes.iter().map(|s| Conv3x3::new(&vb, s)).collect::<Result<Vec<_>>>()?.into_iter();
+        let mut take = |n: usize| convs.by_ref().take(n).collect::<Vec<_>>();
+        let enc = plan.enc.iter().map(|l| take(l.len())).collect();
+        let dec = plan.dec.iter().map(|l| take(l.len())).collect();
+        let out = take(1).pop().expect("the output layer");
+        Ok(UNet { cfg: cfg.clone(), enc, dec, out, skips: plan.skips })
     }
 
     pub fn config(&self) -> &UNetConfig {
         &self.cfg
     }
 
+    /// The device the weights live on.
+    pub fn device(&self) -> &Device {
+        self.out.weight.device()
+    }
+
+    /// Every weight and bias as `(name, tensor)`, in the order of [`UNetConfig::conv_shapes`]
+    /// (`enc_conv0.weight`, `enc_conv0.bias`, ...): what TZA export writes.
+    pub fn named_tensors(&self) -> Vec<(String, Tensor)> {
+        self.enc
+            .iter()
+            .chain(&self.dec)
+            .flatten()
+            .chain(std::iter::once(&self.out))
+            .flat_map(|c| {
+                [(format!("{}.weight", c.name), c.weight.clone()), (format!("{}.bias", c.name), c.bias.clone())]
+            })
+            .collect()
+    }
+
     /// Pads `x` (NCHW) with zeros at the bottom and right to multiples of [`ALIGNMENT`], runs the
-    /// network and crops the output back to the input's height and width.
+    /// network and crops the output back to the input's height and width. This is what OIDN's runtime does
+    /// for an image that fits one tile: the image sits at the top left of a zero tile.
     pub fn forward_padded(&self, x: &Tensor) -> Result<Tensor> {
         let (_, _, h, w) = x.dims4()?;
         let y = self.forward(&pad_to_multiple(x, ALIGNMENT)?)?;
@@ -165,31 +323,31 @@ impl Module for UNet {
                  (use forward_padded or pad_to_multiple)"
             )
         }
-        let x = self.enc_conv0.forward_relu(input)?;
-        let x = self.enc_conv1.forward_relu(&x)?;
-        let pool1 = x.max_pool2d(2)?;
-        let x = self.enc_conv2.forward_relu(&pool1)?;
-        let pool2 = x.max_pool2d(2)?;
-        let x = self.enc_conv3.forward_relu(&pool2)?;
-        let pool3 = x.max_pool2d(2)?;
-        let x = self.enc_conv4.forward_relu(&pool3)?;
-        let x = x.max_pool2d(2)?;
-        let x = self.enc_conv5a.forward_relu(&x)?;
-        let x = self.enc_conv5b.forward_relu(&x)?;
-
-        let x = Tensor::cat(&[&upsample2(&x)?, &pool3], 1)?;
-        let x = self.dec_conv4a.forward_relu(&x)?;
-        let x = self.dec_conv4b.forward_relu(&x)?;
-        let x = Tensor::cat(&[&upsample2(&x)?, &pool2], 1)?;
-        let x = self.dec_conv3a.forward_relu(&x)?;
-        let x = self.dec_conv3b.forward_relu(&x)?;
-        let x = Tensor::cat(&[&upsample2(&x)?, &pool1], 1)?;
-        let x = self.dec_conv2a.forward_relu(&x)?;
-        let x = self.dec_conv2b.forward_relu(&x)?;
-        let x = Tensor::cat(&[&upsample2(&x)?, input], 1)?;
-        let x = self.dec_conv1a.forward_relu(&x)?;
-        let x = self.dec_conv1b.forward_relu(&x)?;
-        self.dec_conv0.forward(&x)
+        // skips = [input, pool1, pool2, pool3]
+        let mut skips = vec![input.clone()];
+        let mut x = input.clone();
+        for (level, convs) in self.enc.iter().enumerate() {
+            for conv in convs {
+                x = conv.forward_relu(&x)?;
+            }
+            if level < 4 {
+                x = x.max_pool2d(2)?;
+                if level < 3 {
+                    skips.push(x.clone());
+                }
+            }
+        }
+        for convs in &self.dec {
+            let skip = skips.pop().expect("one skip per decoder level");
+            x = upsample2(&x)?;
+            if self.skips {
+                x = Tensor::cat(&[&x, &skip], 1)?;
+            }
+            for conv in convs {
+                x = conv.forward_relu(&x)?;
+            }
+        }
+        self.out.forward(&x)
     }
 }
 

@@ -1,5 +1,6 @@
 //! Integration tests of hush-eval (one binary, modules by topic).
 
+mod golden;
 mod metrics;
 mod report;
 mod timing;

@@ -4,6 +4,7 @@
 mod input;
 mod loss;
 mod transfer;
+mod tza;
 mod unet;
 mod weights;
 

@@ -1,6 +1,6 @@
 use candle_core::{DType, Device, Module, Result, Tensor};
 use candle_nn::{VarBuilder, VarMap};
-use hush_net::{UNet, UNetConfig, UNetKind, init_weights};
+use hush_net::{THESIS_M1_WIDTH, THESIS_M2_WIDTH, UNet, UNetConfig, UNetKind, init_weights};
 
 use crate::{det_tensor, max_abs_diff};
 
@@ -29,16 +29,106 @@ fn parameter_count_matches_oidn() -> Result<()> {
     Ok(())
 }
 
+/// Hidden widths are ⌊base × width⌋ (at least 1), the thesis' rule.
 #[test]
-fn width_multiplier_rounds_and_keeps_one_channel() {
+fn width_multiplier_floors_and_keeps_one_channel() {
+    let widths = |width: f64| -> Vec<usize> {
+        let cfg = UNetConfig { kind: UNetKind::Unet, in_channels: 9, out_channels: 3, width };
+        cfg.conv_shapes().iter().map(|s| s.out_channels).collect()
+    };
+    // enc_conv0, enc_conv1, enc_conv2, ..., dec_conv1b, then dec_conv0 (always 3).
+    assert_eq!(widths(1.0), [32, 32, 48, 64, 80, 96, 96, 112, 112, 96, 96, 64, 64, 64, 32, 3]);
+    assert_eq!(widths(0.25), [8, 8, 12, 16, 20, 24, 24, 28, 28, 24, 24, 16, 16, 16, 8, 3]);
+    // 0.66 × 48 = 31.68 → 31, 0.66 × 80 = 52.8 → 52, 0.1 × 80 = 8 exactly (not 7.999…).
+    assert_eq!(widths(0.66)[2], 31);
+    assert_eq!(widths(0.66)[4], 52);
+    assert_eq!(widths(0.1)[4], 8);
+    assert_eq!(widths(0.001), [1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 3]);
     let cfg = |width| UNetConfig { kind: UNetKind::Unet, in_channels: 9, out_channels: 3, width };
-    assert_eq!(cfg(0.25).widths(), [8, 12, 16, 20, 24, 28, 24, 16, 16, 16, 8]);
-    // 0.66 × 48 = 31.68 → 32, 0.66 × 80 = 52.8 → 53.
-    assert_eq!(cfg(0.66).widths()[1], 32);
-    assert_eq!(cfg(0.66).widths()[3], 53);
-    assert_eq!(cfg(0.001).widths(), [1; 11]);
     assert!(cfg(0.0).validate().is_err());
     assert!(cfg(f64::NAN).validate().is_err());
+}
+
+/// The thesis' capacities (§7.5.2): M1 has c1 = ⌊c·0.66⌋ and M2 c2 = ⌊c1·0.5⌋ for every hidden width c;
+/// the M2 width multiplier 0.33 gives exactly that for every layer of every kind.
+#[test]
+fn thesis_capacities_m1_and_m2() {
+    for kind in UNetKind::ALL {
+        let at = |width| UNetConfig { kind, in_channels: 12, out_channels: 3, width }.conv_shapes();
+        let (full, m1, m2) = (at(1.0), at(THESIS_M1_WIDTH), at(THESIS_M2_WIDTH));
+        for ((c, c1), c2) in full.iter().zip(&m1).zip(&m2).take(full.len() - 1) {
+            let expect1 = (c.out_channels as f64 * 0.66).floor() as usize;
+            assert_eq!(c1.out_channels, expect1, "{kind:?} {}", c.name);
+            assert_eq!(c2.out_channels, expect1 / 2, "{kind:?} {}", c.name);
+        }
+    }
+    assert_eq!(UNetConfig::thesis_m1(12).width, THESIS_M1_WIDTH);
+    assert_eq!(UNetConfig::thesis_m2(12).width, THESIS_M2_WIDTH);
+    // M_OIDN > M1 > M2 in parameters (12 inputs, as the thesis trained them).
+    let p = |cfg: UNetConfig| cfg.parameter_count();
+    let (full, m1, m2) = (p(UNetConfig::oidn(12)), p(UNetConfig::thesis_m1(12)), p(UNetConfig::thesis_m2(12)));
+    assert!(full > m1 && m1 > m2, "{full} {m1} {m2}");
+}
+
+/// Layer names, shapes and parameter counts of every kind, checked against OIDN's own weight files
+/// (`rt_hdr*.tza`: 914,627 / 917,219 / 919,811 for `unet` with 3 / 6 / 9 inputs, 320,035 for
+/// `unet_small`, 3,848,387 for `unet_large`).
+#[test]
+fn kinds_have_oidn_layers_and_parameter_counts() -> Result<()> {
+    let count = |kind, in_channels| UNetConfig { kind, in_channels, out_channels: 3, width: 1.0 }.parameter_count();
+    assert_eq!(count(UNetKind::Unet, 3), 914_627);
+    assert_eq!(count(UNetKind::Unet, 6), 917_219);
+    assert_eq!(count(UNetKind::Unet, 9), 919_811);
+    assert_eq!(count(UNetKind::UnetSmall, 9), 320_035);
+    assert_eq!(count(UNetKind::UnetLarge, 9), 3_848_387);
+
+    let shapes = |kind| UNetConfig { kind, in_channels: 9, out_channels: 3, width: 1.0 }.conv_shapes();
+    let large = shapes(UNetKind::UnetLarge);
+    assert_eq!(large.len(), 19);
+    assert_eq!((large[0].name, large[0].in_channels, large[0].out_channels), ("enc_conv1a", 9, 64));
+    assert_eq!((large[1].name, large[1].in_channels, large[1].out_channels), ("enc_conv1b", 64, 64));
+    let by_name = |v: &[hush_net::ConvShape], n: &str| v.iter().find(|s| s.name == n).cloned().unwrap();
+    assert_eq!(by_name(&large, "dec_conv4a").in_channels, 256 + 128);
+    assert_eq!(by_name(&large, "dec_conv1a").in_channels, 96 + 9);
+    assert_eq!((large[18].name, large[18].in_channels, large[18].out_channels), ("dec_conv1c", 64, 3));
+    let small = shapes(UNetKind::UnetSmall);
+    assert_eq!(by_name(&small, "dec_conv3a").in_channels, 64 + 32);
+    assert_eq!(by_name(&small, "dec_conv1a").in_channels, 32 + 9);
+
+    // The autoencoder is `unet` without the concatenations.
+    let dae = shapes(UNetKind::Autoencoder);
+    let unet = shapes(UNetKind::Unet);
+    assert_eq!(dae.iter().map(|s| s.name).collect::<Vec<_>>(), unet.iter().map(|s| s.name).collect::<Vec<_>>());
+    for (name, without, with) in
+        [("dec_conv4a", 96, 96 + 64), ("dec_conv3a", 112, 112 + 48), ("dec_conv1a", 64, 64 + 9)]
+    {
+        assert_eq!(by_name(&dae, name).in_channels, without, "{name}");
+        assert_eq!(by_name(&unet, name).in_channels, with, "{name}");
+    }
+    Ok(())
+}
+
+/// Every kind runs, keeps the spatial size, and names its tensors after its layers.
+#[test]
+fn every_kind_runs_and_names_its_tensors() -> Result<()> {
+    for kind in UNetKind::ALL {
+        let varmap = VarMap::new();
+        let cfg = UNetConfig { kind, in_channels: 6, out_channels: 3, width: 0.125 };
+        let net = UNet::new(VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu), &cfg)?;
+        init_weights(&varmap, 3)?;
+        let y = net.forward_padded(&det_tensor(&[1, 6, 20, 24], 0.0, 1.0, 6)?)?;
+        assert_eq!(y.dims(), &[1, 3, 20, 24], "{kind:?}");
+        let names: Vec<String> = net.named_tensors().into_iter().map(|(n, _)| n).collect();
+        let mut keys: Vec<String> = varmap.data().lock().unwrap().keys().cloned().collect();
+        keys.sort();
+        let mut sorted = names.clone();
+        sorted.sort();
+        assert_eq!(sorted, keys, "{kind:?}");
+        assert_eq!(names.len(), 2 * cfg.conv_shapes().len());
+        assert_eq!(serde_json::to_string(&kind).unwrap(), format!("\"{}\"", kind.name()));
+        assert_eq!(UNetKind::parse(kind.name()), Some(kind));
+    }
+    Ok(())
 }
 
 #[test]
@@ -67,16 +157,20 @@ fn output_shape_and_size_errors() -> Result<()> {
 /// gradients.
 #[test]
 fn gradients_reach_every_layer() -> Result<()> {
-    let (varmap, net) = build(9, 0.25)?;
-    init_weights(&varmap, 7)?;
-    let x = det_tensor(&[1, 9, 32, 32], 0.0, 1.0, 5)?;
-    let loss = net.forward(&x)?.sqr()?.mean_all()?;
-    let grads = loss.backward()?;
-    for (name, var) in varmap.data().lock().unwrap().iter() {
-        let g = grads.get(var).unwrap_or_else(|| panic!("no gradient for {name}"));
-        let v = g.flatten_all()?.to_vec1::<f32>()?;
-        assert!(v.iter().all(|x| x.is_finite()), "{name}: non-finite gradient");
-        assert!(v.iter().any(|x| *x != 0.0), "{name}: zero gradient");
+    for kind in UNetKind::ALL {
+        let varmap = VarMap::new();
+        let cfg = UNetConfig { kind, in_channels: 9, out_channels: 3, width: 0.25 };
+        let net = UNet::new(VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu), &cfg)?;
+        init_weights(&varmap, 7)?;
+        let x = det_tensor(&[1, 9, 32, 32], 0.0, 1.0, 5)?;
+        let loss = net.forward(&x)?.sqr()?.mean_all()?;
+        let grads = loss.backward()?;
+        for (name, var) in varmap.data().lock().unwrap().iter() {
+            let g = grads.get(var).unwrap_or_else(|| panic!("{kind:?}: no gradient for {name}"));
+            let v = g.flatten_all()?.to_vec1::<f32>()?;
+            assert!(v.iter().all(|x| x.is_finite()), "{kind:?} {name}: non-finite gradient");
+            assert!(v.iter().any(|x| *x != 0.0), "{kind:?} {name}: zero gradient");
+        }
     }
     Ok(())
 }
