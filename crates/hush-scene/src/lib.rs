@@ -21,11 +21,13 @@
 //! assert_eq!((scene.film.width, scene.film.height), (64, 32));
 //! ```
 
+mod bvh;
 mod error;
 mod mitsuba;
 mod model;
 mod obj;
 
+pub use bvh::{Bvh, BvhNode, MAX_LEAF_TRIANGLES};
 pub use error::SceneError;
 pub use model::{Camera, Film, Material, Mesh, Scene};
 pub use obj::load_obj;

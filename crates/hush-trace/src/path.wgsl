@@ -63,6 +63,7 @@ struct Light {
 // Per pixel, ACCUM_STRIDE floats: beauty sum (3), beauty squared sum (3), albedo (3),
 // diffuse (3), specular (3), normal (3), count of non-finite samples discarded (1).
 @group(0) @binding(5) var<storage, read_write> accum: array<f32>;
+@group(0) @binding(6) var<storage, read> nodes: array<Node>;
 
 const PI: f32 = 3.14159265358979;
 const INV_PI: f32 = 0.318309886183791;
@@ -94,37 +95,119 @@ struct Hit {
     v: f32,
 }
 
-// Möller–Trumbore against every triangle: the nearest hit with t in (0, t_max).
-fn intersect(o: vec3<f32>, d: vec3<f32>, t_max: f32) -> Hit {
-    var hit = Hit(t_max, 0xffffffffu, 0.0, 0.0);
-    for (var i = 0u; i < params.tri_count; i++) {
-        let tri = tris[i];
-        let pv = cross(d, tri.e2.xyz);
-        let det = dot(tri.e1.xyz, pv);
-        if abs(det) < 1e-20 {
+// A BVH node (hush_scene::BvhNode): a leaf when count > 0 (triangles first .. first + count),
+// otherwise an interior node with children first and first + 1.
+struct Node {
+    min: vec3<f32>,
+    first: u32,
+    max: vec3<f32>,
+    count: u32,
+}
+
+const NO_HIT: u32 = 0xffffffffu;
+const STACK_SIZE: u32 = 64u;
+
+// Entry distance of the ray into a node's box, or T_MAX when it misses within t_max.
+fn enter(n: Node, o: vec3<f32>, inv_d: vec3<f32>, t_max: f32) -> f32 {
+    let t0 = (n.min - o) * inv_d;
+    let t1 = (n.max - o) * inv_d;
+    let near = max(max(min(t0.x, t1.x), min(t0.y, t1.y)), max(min(t0.z, t1.z), 0.0));
+    let far = min(min(max(t0.x, t1.x), max(t0.y, t1.y)), min(max(t0.z, t1.z), t_max));
+    return select(T_MAX, near, near <= far);
+}
+
+// Möller–Trumbore; updates `hit` when triangle i is nearer.
+fn test_triangle(i: u32, o: vec3<f32>, d: vec3<f32>, hit: ptr<function, Hit>) {
+    let tri = tris[i];
+    let pv = cross(d, tri.e2.xyz);
+    let det = dot(tri.e1.xyz, pv);
+    if abs(det) < 1e-20 {
+        return;
+    }
+    let inv = 1.0 / det;
+    let tv = o - tri.p0.xyz;
+    let u = dot(tv, pv) * inv;
+    if u < 0.0 || u > 1.0 {
+        return;
+    }
+    let qv = cross(tv, tri.e1.xyz);
+    let v = dot(d, qv) * inv;
+    if v < 0.0 || u + v > 1.0 {
+        return;
+    }
+    let t = dot(tri.e2.xyz, qv) * inv;
+    if t > 0.0 && t < (*hit).t {
+        *hit = Hit(t, i, u, v);
+    }
+}
+
+// The nearest hit with t in (0, t_max) through the BVH; with `any`, the first hit found.
+fn trace_ray(o: vec3<f32>, d: vec3<f32>, t_max: f32, any: bool) -> Hit {
+    var hit = Hit(t_max, NO_HIT, 0.0, 0.0);
+    if params.tri_count == 0u {
+        return hit;
+    }
+    // Tiny direction components are replaced by ±1e-30 so that their reciprocals stay finite.
+    let tiny = select(vec3<f32>(-1e-30), vec3<f32>(1e-30), d >= vec3<f32>(0.0));
+    let inv_d = 1.0 / select(d, tiny, abs(d) < vec3<f32>(1e-30));
+    var stack: array<u32, STACK_SIZE>;
+    var sp = 0u;
+    var node = 0u;
+    if enter(nodes[0], o, inv_d, t_max) >= T_MAX {
+        return hit;
+    }
+    loop {
+        let n = nodes[node];
+        if n.count > 0u {
+            for (var k = n.first; k < n.first + n.count; k++) {
+                test_triangle(k, o, d, &hit);
+            }
+            if any && hit.tri != NO_HIT {
+                return hit;
+            }
+            if sp == 0u {
+                break;
+            }
+            sp -= 1u;
+            node = stack[sp];
             continue;
         }
-        let inv = 1.0 / det;
-        let tv = o - tri.p0.xyz;
-        let u = dot(tv, pv) * inv;
-        if u < 0.0 || u > 1.0 {
+        let a = n.first;
+        let b = n.first + 1u;
+        var ta = enter(nodes[a], o, inv_d, hit.t);
+        var tb = enter(nodes[b], o, inv_d, hit.t);
+        var near = a;
+        var far = b;
+        if tb < ta {
+            near = b;
+            far = a;
+            let t = ta;
+            ta = tb;
+            tb = t;
+        }
+        if ta >= T_MAX {
+            if sp == 0u {
+                break;
+            }
+            sp -= 1u;
+            node = stack[sp];
             continue;
         }
-        let qv = cross(tv, tri.e1.xyz);
-        let v = dot(d, qv) * inv;
-        if v < 0.0 || u + v > 1.0 {
-            continue;
-        }
-        let t = dot(tri.e2.xyz, qv) * inv;
-        if t > 0.0 && t < hit.t {
-            hit = Hit(t, i, u, v);
+        node = near;
+        if tb < T_MAX && sp < STACK_SIZE {
+            stack[sp] = far;
+            sp += 1u;
         }
     }
     return hit;
 }
 
+fn intersect(o: vec3<f32>, d: vec3<f32>, t_max: f32) -> Hit {
+    return trace_ray(o, d, t_max, false);
+}
+
 fn occluded(o: vec3<f32>, d: vec3<f32>, t_max: f32) -> bool {
-    return intersect(o, d, t_max).tri != 0xffffffffu;
+    return trace_ray(o, d, t_max, true).tri != NO_HIT;
 }
 
 // Moves a ray origin off the surface, to the side of `n` that `d` points to.
@@ -191,7 +274,7 @@ fn trace(pixel: vec2<u32>) -> Sample {
     var depth = 0u;
     loop {
         let hit = intersect(o, d, T_MAX);
-        if hit.tri == 0xffffffffu {
+        if hit.tri == NO_HIT {
             break;
         }
         let tri = tris[hit.tri];

@@ -5,7 +5,7 @@ use hush_dataset::Image;
 use hush_scene::Scene;
 use wgpu::util::DeviceExt;
 
-use crate::upload::{GpuLight, GpuMaterial, GpuNormals, GpuTri, flatten};
+use crate::upload::{GpuLight, GpuMaterial, GpuNode, GpuNormals, GpuTri, flatten};
 use crate::{GpuContext, TraceError};
 
 /// The WGSL source of the path-tracing kernel (validated by a test with naga).
@@ -120,7 +120,7 @@ impl<'a> Renderer<'a> {
             )));
         }
 
-        let flat = flatten(scene);
+        let flat = flatten(scene)?;
         let device = &self.gpu.device;
         let storage = |label: &str, bytes: &[u8]| {
             // Empty storage buffers are not allowed: bind one zeroed element instead.
@@ -141,6 +141,7 @@ impl<'a> Renderer<'a> {
         let normals = storage("normals", bytemuck::cast_slice::<GpuNormals, u8>(&flat.normals));
         let materials = storage("materials", bytemuck::cast_slice::<GpuMaterial, u8>(&flat.materials));
         let lights = storage("lights", bytemuck::cast_slice::<GpuLight, u8>(&flat.lights));
+        let nodes = storage("bvh", bytemuck::cast_slice::<GpuNode, u8>(&flat.nodes));
         let accum = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("accum"),
             size: accum_bytes,
@@ -170,6 +171,7 @@ impl<'a> Renderer<'a> {
                 wgpu::BindGroupEntry { binding: 3, resource: materials.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 4, resource: lights.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 5, resource: accum.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 6, resource: nodes.as_entire_binding() },
             ],
         });
 

@@ -2,7 +2,9 @@
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
-use hush_scene::{Material, Scene};
+use hush_scene::{Bvh, BvhNode, Material, Scene};
+
+use crate::TraceError;
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -33,7 +35,26 @@ pub(crate) struct GpuLight {
     pub pad: [u32; 2],
 }
 
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub(crate) struct GpuNode {
+    pub min: [f32; 3],
+    pub first: u32,
+    pub max: [f32; 3],
+    pub count: u32,
+}
+
+impl From<BvhNode> for GpuNode {
+    fn from(n: BvhNode) -> Self {
+        GpuNode { min: n.min, first: n.first, max: n.max, count: n.count }
+    }
+}
+
+/// The kernel's traversal stack; mirrors `STACK_SIZE` in the kernel.
+const STACK_SIZE: usize = 64;
+
 pub(crate) struct GpuScene {
+    pub nodes: Vec<GpuNode>,
     pub tris: Vec<GpuTri>,
     pub normals: Vec<GpuNormals>,
     pub materials: Vec<GpuMaterial>,
@@ -47,7 +68,8 @@ fn v4(v: Vec3, w: f32) -> [f32; 4] {
 /// Each mesh becomes one material record (its BSDF and emission). Emissive triangles are
 /// picked in proportion to their power (area × summed RGB radiance); the kernel's per-area
 /// density of a light point is that probability divided by the triangle's area, stored in `e1.w`.
-pub(crate) fn flatten(scene: &Scene) -> GpuScene {
+/// Triangles are stored in the leaf order of a BVH built over them.
+pub(crate) fn flatten(scene: &Scene) -> Result<GpuScene, TraceError> {
     let mut tris = Vec::with_capacity(scene.triangle_count());
     let mut normals = Vec::with_capacity(scene.triangle_count());
     let mut materials = Vec::with_capacity(scene.meshes.len());
@@ -69,6 +91,30 @@ pub(crate) fn flatten(scene: &Scene) -> GpuScene {
             });
         }
     }
+    // Reorder the triangles into the BVH's leaf order; lights follow their triangles.
+    let corners: Vec<[Vec3; 3]> = tris
+        .iter()
+        .map(|t| {
+            let p0 = Vec3::from_slice(&t.p0[..3]);
+            [p0, p0 + Vec3::from_slice(&t.e1[..3]), p0 + Vec3::from_slice(&t.e2[..3])]
+        })
+        .collect();
+    let bvh = Bvh::build(&corners);
+    if bvh.depth() > STACK_SIZE {
+        return Err(TraceError::Invalid(format!(
+            "the scene's BVH is {} levels deep; the kernel's traversal stack holds {STACK_SIZE}",
+            bvh.depth()
+        )));
+    }
+    let mut new_index = vec![0u32; tris.len()];
+    for (k, &old) in bvh.order.iter().enumerate() {
+        new_index[old as usize] = k as u32;
+    }
+    let mut tris: Vec<GpuTri> = bvh.order.iter().map(|&i| tris[i as usize]).collect();
+    let normals: Vec<GpuNormals> = bvh.order.iter().map(|&i| normals[i as usize]).collect();
+    for (tri, _) in light_weights.iter_mut() {
+        *tri = new_index[*tri as usize];
+    }
     let total: f64 = light_weights.iter().map(|&(_, w)| w as f64).sum();
     let mut lights = Vec::with_capacity(light_weights.len());
     let mut running = 0.0f64;
@@ -82,5 +128,6 @@ pub(crate) fn flatten(scene: &Scene) -> GpuScene {
     if let Some(last) = lights.last_mut() {
         last.cdf = 1.0;
     }
-    GpuScene { tris, normals, materials, lights }
+    let nodes = bvh.nodes.into_iter().map(GpuNode::from).collect();
+    Ok(GpuScene { nodes, tris, normals, materials, lights })
 }

@@ -1,5 +1,7 @@
 //! hush-scene's integration tests: loading the Mitsuba Cornell box and rejecting bad input.
 
+mod bvh;
+
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
