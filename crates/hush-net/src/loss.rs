@@ -1,5 +1,12 @@
 //! Training losses and the SSIM metric, on NCHW tensors. Every function checks shapes first and returns a
-//! scalar (rank-0) tensor through which gradients flow.
+//! scalar (rank-0) tensor through which gradients flow. The set is OIDN's (`training/loss.py`): L1, MSE
+//! (`l2`), MAPE, SMAPE, SSIM, MS-SSIM, L1 + MS-SSIM (the thesis' mix) and L1 + gradient (`l1_grad`).
+//!
+//! Losses take what the network sees, i.e. images after [`crate::prepare_color`], whose sanitization policy
+//! (non-finite → 0, then the transfer and the ≤ 1 clamp) keeps raw radiance of any magnitude, NaN and ±Inf
+//! out of them; every loss and its gradient are then finite (tested on constant, black, 1e-8, 1e6, NaN,
+//! ±Inf and single-firefly images). A NaN the network itself produces is not hidden: the loss is NaN and
+//! training stops there.
 //!
 //! SSIM follows Open Image Denoise's `training/ssim.py` (itself pytorch-msssim): an 11-tap Gaussian window
 //! with σ = 1.5 applied separably as a *valid* convolution, K1 = 0.01, K2 = 0.03, data range 1, per image and
@@ -14,7 +21,8 @@
 //! * Small images: OIDN asserts a side > 160 px. Here MS-SSIM uses as many scales as fit (the smallest
 //!   side must stay ≥ 11 after each halving, halving rounds down, so 5 scales need a side ≥ 176) with the
 //!   weights of those scales renormalized to sum to 1; one scale is plain SSIM. Sides < 11 are an error.
-//!   Odd sides drop their last row/column when halved (OIDN pads them instead).
+//!   When every scale fits the weights are used as given, like pytorch-msssim and OIDN (Wang's weights
+//!   sum to 1.0001). Odd sides drop their last row/column when halved (OIDN pads them instead).
 
 use candle_core::{CpuStorage, CustomOp1, DType, Layout, Result, Shape, Tensor, bail};
 use serde::{Deserialize, Serialize};
@@ -50,6 +58,12 @@ pub enum Loss {
     /// 0.16 · L1 + 0.84 · (1 − MS-SSIM): the thesis' best loss.
     #[default]
     Mix,
+    /// Mean absolute percentage error `|x − y| / (|y| + 0.01)` (OIDN's `mape`).
+    Mape,
+    /// Symmetric MAPE `|x − y| / (|x| + |y| + 0.01)` (OIDN's `smape`).
+    Smape,
+    /// 0.5 · L1 + 0.5 · [`gradient_l1`] (OIDN's `l1_grad`).
+    L1Grad,
 }
 
 impl Loss {
@@ -61,6 +75,37 @@ impl Loss {
             Loss::Ssim => ssim(x, y)?.affine(-1.0, 1.0),
             Loss::MsSsim => ms_ssim(x, y)?.affine(-1.0, 1.0),
             Loss::Mix => mix(x, y),
+            Loss::Mape => mape(x, y),
+            Loss::Smape => smape(x, y),
+            Loss::L1Grad => l1_grad(x, y),
+        }
+    }
+
+    pub const ALL: [Loss; 8] =
+        [Loss::L1, Loss::Mse, Loss::Ssim, Loss::MsSsim, Loss::Mix, Loss::Mape, Loss::Smape, Loss::L1Grad];
+
+    /// The serialized name (`l1`, `mse`, `ssim`, `ms_ssim`, `mix`, `mape`, `smape`, `l1_grad`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Loss::L1 => "l1",
+            Loss::Mse => "mse",
+            Loss::Ssim => "ssim",
+            Loss::MsSsim => "ms_ssim",
+            Loss::Mix => "mix",
+            Loss::Mape => "mape",
+            Loss::Smape => "smape",
+            Loss::L1Grad => "l1_grad",
+        }
+    }
+
+    /// Parses [`Loss::name`] or OIDN's name for it (`l2`, `msssim`, `l1_msssim`; `mae` for L1).
+    pub fn parse(name: &str) -> Option<Loss> {
+        match name {
+            "mae" => Some(Loss::L1),
+            "l2" => Some(Loss::Mse),
+            "msssim" | "ms-ssim" => Some(Loss::MsSsim),
+            "l1_msssim" => Some(Loss::Mix),
+            _ => Loss::ALL.into_iter().find(|l| l.name() == name),
         }
     }
 }
@@ -100,6 +145,45 @@ pub fn mse(x: &Tensor, y: &Tensor) -> Result<Tensor> {
     (x - y)?.sqr()?.mean_all()
 }
 
+/// OIDN's `mape`: mean of `|x − y| / (|y| + 0.01)`, an L1 relative to the target.
+pub fn mape(x: &Tensor, y: &Tensor) -> Result<Tensor> {
+    check_same_shape("mape", x, y)?;
+    ((x - y)?.abs()? / (y.abs()? + 1e-2)?)?.mean_all()
+}
+
+/// OIDN's `smape`: mean of `|x − y| / (|x| + |y| + 0.01)`, in [0, 1) per sample.
+pub fn smape(x: &Tensor, y: &Tensor) -> Result<Tensor> {
+    check_same_shape("smape", x, y)?;
+    ((x - y)?.abs()? / ((x.abs()? + y.abs()?)? + 1e-2)?)?.mean_all()
+}
+
+/// Forward differences of an NCHW tensor on the `(H − 1) × (W − 1)` grid, vertical then horizontal,
+/// concatenated along the channels: OIDN's `tensor_gradient` (`training/util.py`).
+fn image_gradient(x: &Tensor) -> Result<Tensor> {
+    let (_, _, h, w) = x.dims4()?;
+    let x0 = x.narrow(2, 0, h - 1)?.narrow(3, 0, w - 1)?;
+    let didy = (x.narrow(2, 1, h - 1)?.narrow(3, 0, w - 1)? - &x0)?;
+    let didx = (x.narrow(2, 0, h - 1)?.narrow(3, 1, w - 1)? - &x0)?;
+    Tensor::cat(&[&didy, &didx], 1)
+}
+
+/// OIDN's gradient loss: mean absolute difference of the images' forward differences ([`image_gradient`]).
+/// Images need at least 2×2 pixels.
+pub fn gradient_l1(x: &Tensor, y: &Tensor) -> Result<Tensor> {
+    check_same_shape("gradient_l1", x, y)?;
+    let dims = x.dims();
+    if dims.len() != 4 || dims[2] < 2 || dims[3] < 2 {
+        bail!("gradient_l1: expected NCHW tensors of at least 2x2 pixels, got {dims:?}")
+    }
+    (image_gradient(x)? - image_gradient(y)?)?.abs()?.mean_all()
+}
+
+/// OIDN's `l1_grad`: 0.5 · L1 + 0.5 · [`gradient_l1`].
+pub fn l1_grad(x: &Tensor, y: &Tensor) -> Result<Tensor> {
+    let g = gradient_l1(x, y)?;
+    (l1(x, y)? * 0.5)? + (g * 0.5)?
+}
+
 /// Mean SSIM over the batch and channels of two NCHW tensors (1 = identical). Works for a single image
 /// (N = 1), so the evaluation code uses it as a metric too.
 pub fn ssim(x: &Tensor, y: &Tensor) -> Result<Tensor> {
@@ -124,16 +208,17 @@ pub fn ms_ssim_scales(h: usize, w: usize, max_scales: usize) -> usize {
     scales
 }
 
-/// MS-SSIM with custom scale weights, finest first (OIDN's `RT` filter trains with `[0.2; 5]`). Only the
-/// weights of the scales that fit are used, renormalized to sum to 1.
+/// MS-SSIM with custom scale weights, finest first (OIDN's `RT` filter trains with `[0.2; 5]`). If the image
+/// is too small for all of them, only the weights of the scales that fit are used, renormalized to sum to 1.
 pub fn ms_ssim_weighted(x: &Tensor, y: &Tensor, weights: &[f64]) -> Result<Tensor> {
     let (_, _, h, w) = check_images("ms_ssim", x, y)?;
     if weights.is_empty() || weights.iter().any(|w| !(w.is_finite() && *w >= 0.0)) {
         bail!("ms_ssim: weights must be a non-empty list of finite values >= 0, got {weights:?}")
     }
     let scales = ms_ssim_scales(h, w, weights.len());
-    let total: f64 = weights[..scales].iter().sum();
-    if total <= 0.0 {
+    let used: f64 = weights[..scales].iter().sum();
+    let total = if scales == weights.len() { 1.0 } else { used };
+    if used <= 0.0 {
         bail!("ms_ssim: the weights of the {scales} scales that fit {h}x{w} sum to 0")
     }
     let (mut x, mut y) = (x.clone(), y.clone());
