@@ -14,14 +14,23 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
     let model = Denoiser::load(&args.model)?;
     let exr = read_exr(&args.color)?;
     let color = exr.layer("").with_context(|| format!("reading the color of {}", args.color.display()))?;
+    let given = |f: Feature| match f {
+        Feature::Albedo => &args.albedo,
+        Feature::Normal => &args.normal,
+        Feature::Diffuse => &args.diffuse,
+        Feature::Specular => &args.specular,
+    };
+    for f in Feature::ALL.into_iter().filter(|f| given(*f).is_some() && !model.features().contains(f)) {
+        eprintln!(
+            "warning: --{} is ignored: model {} takes {}",
+            f.long_name(),
+            args.model.display(),
+            model.info.features
+        );
+    }
     let mut aux: Vec<Image> = Vec::new();
     for &f in model.features() {
-        let given = match f {
-            Feature::Albedo => &args.albedo,
-            Feature::Normal => &args.normal,
-            Feature::Diffuse => &args.diffuse,
-            Feature::Specular => &args.specular,
-        };
+        let given = given(f);
         let image = match given {
             Some(path) => read_rgb(path)?,
             None if exr.channels.keys().any(|k| k.starts_with(&format!("{}.", layer_name(f)))) => {

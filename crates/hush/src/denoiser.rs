@@ -5,9 +5,7 @@ use std::path::Path;
 use anyhow::{Context, Result, bail};
 use candle_core::Device;
 use hush_dataset::Image;
-use hush_net::{
-    Feature, ModelInfo, UNet, build_input, finish_color, hwc_to_nchw, load_model, nchw_to_hwc, transfer::autoexposure,
-};
+use hush_net::{Feature, ModelInfo, UNet, load_model, load_tza};
 
 /// The auxiliary image of a dataset view for one feature.
 pub fn aux_of(view: &hush_dataset::ViewImages, f: Feature) -> &Image {
@@ -32,15 +30,19 @@ pub fn device() -> Result<Device> {
 pub struct Denoiser {
     net: UNet,
     pub info: ModelInfo,
-    device: Device,
 }
 
 impl Denoiser {
+    /// Loads a hush model (`.safetensors`, self-describing) or OIDN weights (`.tza`, e.g. OIDN's official
+    /// `rt_hdr_alb_nrm.tza`). A TZA file carries no feature list: 3 input channels mean color only, 6 color +
+    /// albedo, 9 color + albedo + normal; the network kind comes from its tensor names and shapes.
     pub fn load(path: &Path) -> Result<Denoiser> {
         let bytes = std::fs::read(path).with_context(|| format!("reading model {}", path.display()))?;
         let device = device()?;
-        let (net, info) = load_model(&bytes, &device).with_context(|| format!("loading model {}", path.display()))?;
-        Ok(Denoiser { net, info, device })
+        let is_tza = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("tza"));
+        let loaded = if is_tza { load_tza(&bytes, None, &device) } else { load_model(&bytes, &device) };
+        let (net, info) = loaded.with_context(|| format!("loading model {}", path.display()))?;
+        Ok(Denoiser { net, info })
     }
 
     /// The auxiliary features the model needs, in input order.
@@ -49,7 +51,8 @@ impl Denoiser {
     }
 
     /// Denoises linear HDR `color` with the auxiliary images in the order of [`Self::features`]:
-    /// OIDN's pipeline (autoexposure of the input, transfer, U-Net, inverse transfer).
+    /// OIDN's runtime pipeline (`hush_net::denoise`: autoexposure of the input, transfer, U-Net, inverse
+    /// transfer).
     pub fn denoise(&self, color: &Image, aux: &[&Image]) -> Result<Image> {
         if color.channels != 3 {
             bail!("the color image has {} channels; 3 (RGB) are needed", color.channels);
@@ -75,13 +78,50 @@ impl Denoiser {
                 );
             }
         }
-        let (w, h) = (color.width, color.height);
-        let exposure = autoexposure(&color.data, w, h);
         let aux_data: Vec<&[f32]> = aux.iter().map(|a| a.data.as_slice()).collect();
-        let input = build_input(&self.info.features, w, h, &color.data, &aux_data, exposure, self.info.transfer)?;
-        let x = hwc_to_nchw(&input, w, h, self.info.features.in_channels(), &self.device)?;
-        let y = self.net.forward_padded(&x)?;
-        let out = nchw_to_hwc(&y)?;
-        Ok(Image::new(w, h, 3, finish_color(&out, exposure, self.info.transfer))?)
+        let out = hush_net::denoise(&self.net, &self.info, color.width, color.height, &color.data, &aux_data)?;
+        Ok(Image::new(color.width, color.height, 3, out)?)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn shared(path: &str) -> std::path::PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared").join(path)
+    }
+
+    /// `hush denoise --model rt_hdr_alb_nrm.tza`: the features come from the channel count, the kind from
+    /// the tensor names; inputs of the wrong size or channel count are clear errors. (The image itself is
+    /// checked against OIDN in hush-eval's golden test.)
+    #[test]
+    fn loads_oidn_weights_and_checks_inputs() {
+        let model = Denoiser::load(&shared("weights/oidn-2.5.1/rt_hdr_alb_nrm.tza")).unwrap();
+        assert_eq!(model.features(), &[Feature::Albedo, Feature::Normal]);
+        assert_eq!(model.info.net.kind, hush_net::UNetKind::Unet);
+        let small = Denoiser::load(&shared("weights/oidn-2.5.1/rt_hdr_alb_nrm_small.tza")).unwrap();
+        assert_eq!(small.info.net.kind, hush_net::UNetKind::UnetSmall);
+
+        let read = |name: &str| {
+            let path = shared(&format!("reference/oidn-2.5.1/input_{name}.exr"));
+            hush_dataset::read_rgb(path).unwrap().crop(200, 200, 40, 24).unwrap()
+        };
+        let (color, albedo, normal) = (read("color"), read("albedo"), read("normal"));
+        let out = model.denoise(&color, &[&albedo, &normal]).unwrap();
+        assert_eq!((out.width, out.height, out.channels), (40, 24, 3));
+        assert!(out.data.iter().all(|v| v.is_finite() && *v >= 0.0) && out.data.iter().any(|v| *v > 0.0));
+
+        let err = model.denoise(&color, &[&albedo]).unwrap_err().to_string();
+        assert!(err.contains("needs 2 auxiliary images"), "{err}");
+        let narrow = albedo.crop(0, 0, 39, 24).unwrap();
+        let err = model.denoise(&color, &[&narrow, &normal]).unwrap_err().to_string();
+        assert!(err.contains("albedo image is 39×24×3") && err.contains("40×24"), "{err}");
+        let grey = color.select_channels(0..1).unwrap();
+        let err = model.denoise(&grey, &[&albedo, &normal]).unwrap_err().to_string();
+        assert!(err.contains("1 channels"), "{err}");
+
+        let err = Denoiser::load(&shared("weights/oidn-2.5.1/README.md")).map(|_| ()).unwrap_err();
+        assert!(format!("{err:#}").contains("README.md"), "{err:#}");
     }
 }
