@@ -1,4 +1,6 @@
-use glam::Vec3;
+use std::path::PathBuf;
+
+use glam::{Mat4, Vec2, Vec3};
 
 /// A pinhole camera. `fov_y_deg` is the vertical field of view in degrees.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -46,20 +48,188 @@ pub struct Film {
     pub height: u32,
 }
 
+/// Index of a [`Texture`] in [`Scene::textures`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct TextureId(pub u32);
+
+/// A reflectance: a constant linear RGB colour or a texture looked up by the mesh's UVs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Reflectance {
+    Rgb(Vec3),
+    Texture(TextureId),
+}
+
+impl From<Vec3> for Reflectance {
+    fn from(v: Vec3) -> Self {
+        Reflectance::Rgb(v)
+    }
+}
+
+/// A decoded image texture: linear RGB, rows top to bottom, `width × height × 3` floats.
+///
+/// 8-bit images (PNG, JPEG) are taken as sRGB-encoded and converted to linear, as Mitsuba's
+/// `bitmap` does by default (`raw = false`); float images (EXR) are kept as they are.
+/// Texture coordinates follow Mitsuba: (0, 0) is the top-left corner of the image, u grows to
+/// the right and v downwards (OBJ files store v upwards; their loader flips it, as Mitsuba's
+/// `flip_tex_coords` does by default). Lookups repeat outside [0, 1].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Texture {
+    pub path: PathBuf,
+    pub width: u32,
+    pub height: u32,
+    pub data: Vec<f32>,
+}
+
+impl Texture {
+    /// The texel at column `x`, row `y` (row 0 at the top).
+    pub fn texel(&self, x: u32, y: u32) -> Vec3 {
+        let i = 3 * (y as usize * self.width as usize + x as usize);
+        Vec3::new(self.data[i], self.data[i + 1], self.data[i + 2])
+    }
+
+    /// The mean texel value (a stand-in colour where a texture cannot be used).
+    pub fn mean(&self) -> Vec3 {
+        let mut sum = [0f64; 3];
+        for px in self.data.chunks_exact(3) {
+            for c in 0..3 {
+                sum[c] += px[c] as f64;
+            }
+        }
+        let n = (self.data.len() / 3).max(1) as f64;
+        Vec3::new((sum[0] / n) as f32, (sum[1] / n) as f32, (sum[2] / n) as f32)
+    }
+}
+
+/// The complex index of refraction of a conductor, per RGB channel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ComplexIor {
+    pub eta: Vec3,
+    pub k: Vec3,
+}
+
 /// A surface's scattering model. A closed set: new models are new variants.
+///
+/// `alpha` is the GGX roughness (Mitsuba's `alpha`, the root mean square slope); `0` is a
+/// perfectly smooth surface (Mitsuba's `conductor`, `dielectric`, `plastic`). `two_sided`
+/// is Mitsuba's `twosided` wrapper (glTF's `doubleSided`): the back scatters like the front.
+/// Without it, diffuse, conductor and plastic surfaces are black from behind. Dielectrics are
+/// always two-sided: they separate an inside from an outside.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Material {
-    /// Lambertian reflection, one-sided like Mitsuba's `diffuse`: black from behind.
-    Diffuse { reflectance: Vec3 },
+    /// Lambertian reflection (`diffuse`).
+    Diffuse { reflectance: Reflectance, two_sided: bool },
+    /// A metal (`conductor`, `roughconductor`): Fresnel reflectance from `ior` times
+    /// `specular_reflectance`; `ior: None` is Mitsuba's `material="none"`, a perfect mirror
+    /// (Fresnel factor 1) tinted by `specular_reflectance`.
+    Conductor { alpha: f32, ior: Option<ComplexIor>, specular_reflectance: Vec3, two_sided: bool },
+    /// Glass and liquids (`dielectric`, `roughdielectric`, `thindielectric`). `thin` is a
+    /// sheet of zero thickness: light passes through without bending.
+    Dielectric {
+        alpha: f32,
+        int_ior: f32,
+        ext_ior: f32,
+        thin: bool,
+        specular_reflectance: Vec3,
+        specular_transmittance: Vec3,
+    },
+    /// A diffuse base under a smooth or rough dielectric coating (`plastic`, `roughplastic`).
+    /// `nonlinear` is Mitsuba's flag for the base's internal scattering model.
+    Plastic {
+        diffuse_reflectance: Reflectance,
+        specular_reflectance: Vec3,
+        alpha: f32,
+        int_ior: f32,
+        ext_ior: f32,
+        nonlinear: bool,
+        two_sided: bool,
+    },
 }
 
 impl Material {
-    /// The diffuse reflectance used as the albedo feature.
-    pub fn albedo(&self) -> Vec3 {
+    /// Mitsuba's default BSDF: a diffuse one of reflectance 0.5, one-sided.
+    pub const DEFAULT: Material =
+        Material::Diffuse { reflectance: Reflectance::Rgb(Vec3::splat(0.5)), two_sided: false };
+
+    /// Mitsuba's plugin name for this material (`diffuse`, `roughconductor`, `thindielectric`, ...).
+    pub fn kind(&self) -> &'static str {
         match *self {
-            Material::Diffuse { reflectance } => reflectance,
+            Material::Diffuse { .. } => "diffuse",
+            Material::Conductor { alpha, .. } if alpha > 0.0 => "roughconductor",
+            Material::Conductor { .. } => "conductor",
+            Material::Dielectric { thin: true, .. } => "thindielectric",
+            Material::Dielectric { alpha, .. } if alpha > 0.0 => "roughdielectric",
+            Material::Dielectric { .. } => "dielectric",
+            Material::Plastic { alpha, .. } if alpha > 0.0 => "roughplastic",
+            Material::Plastic { .. } => "plastic",
         }
     }
+
+    /// Whether the back side scatters like the front (always true for dielectrics).
+    pub fn two_sided(&self) -> bool {
+        match *self {
+            Material::Diffuse { two_sided, .. }
+            | Material::Conductor { two_sided, .. }
+            | Material::Plastic { two_sided, .. } => two_sided,
+            Material::Dielectric { .. } => true,
+        }
+    }
+
+    /// The same material made two-sided (Mitsuba's `twosided` wrapper).
+    pub fn with_two_sided(self, two: bool) -> Material {
+        match self {
+            Material::Diffuse { reflectance, .. } => Material::Diffuse { reflectance, two_sided: two },
+            Material::Conductor { alpha, ior, specular_reflectance, .. } => {
+                Material::Conductor { alpha, ior, specular_reflectance, two_sided: two }
+            }
+            Material::Plastic {
+                diffuse_reflectance, specular_reflectance, alpha, int_ior, ext_ior, nonlinear, ..
+            } => Material::Plastic {
+                diffuse_reflectance,
+                specular_reflectance,
+                alpha,
+                int_ior,
+                ext_ior,
+                nonlinear,
+                two_sided: two,
+            },
+            d @ Material::Dielectric { .. } => d,
+        }
+    }
+
+    /// The texture this material reads, if any.
+    pub fn texture(&self) -> Option<TextureId> {
+        match *self {
+            Material::Diffuse { reflectance: Reflectance::Texture(t), .. }
+            | Material::Plastic { diffuse_reflectance: Reflectance::Texture(t), .. } => Some(t),
+            _ => None,
+        }
+    }
+}
+
+/// Light arriving from infinitely far away, where rays leave the scene.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Environment {
+    /// Mitsuba's `constant` emitter: the same radiance from every direction.
+    Constant { radiance: Vec3 },
+    /// Mitsuba's `envmap`: an equirectangular (latitude-longitude) RGB image.
+    ///
+    /// Mitsuba 3's convention (`envmap.cpp`): in the emitter's local frame +y is up, and the
+    /// image point (u, v) in [0, 1]² (v = 0 the top row) is the direction
+    /// `(sin θ sin φ, cos θ, -sin θ cos φ)` with θ = π·v, φ = 2π·u; conversely
+    /// u = atan2(d.x, -d.z) / 2π (mod 1), v = acos(d.y) / π. `to_world` maps that frame
+    /// into the scene; `scale` multiplies the radiance.
+    Map(EnvMap),
+}
+
+/// An equirectangular environment map: linear RGB pixels, rows top to bottom.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EnvMap {
+    pub path: PathBuf,
+    pub width: u32,
+    pub height: u32,
+    pub data: Vec<f32>,
+    pub scale: f32,
+    pub to_world: Mat4,
 }
 
 /// A triangle mesh in world space with one material.
@@ -72,6 +242,8 @@ pub struct Mesh {
     pub positions: Vec<Vec3>,
     /// Per-vertex shading normals; `None` means flat (geometric) normals.
     pub normals: Option<Vec<Vec3>>,
+    /// Per-vertex texture coordinates ((0, 0) = top-left of the image; see [`Texture`]).
+    pub uvs: Option<Vec<Vec2>>,
     pub indices: Vec<[u32; 3]>,
     pub material: Material,
     /// Radiance emitted from the front side, if the mesh is an area light.
@@ -83,6 +255,11 @@ impl Mesh {
     pub fn triangle_area(&self, i: usize) -> f32 {
         let [a, b, c] = self.indices[i].map(|k| self.positions[k as usize]);
         0.5 * (b - a).cross(c - a).length()
+    }
+
+    /// Total surface area, summed in double precision.
+    pub fn area(&self) -> f64 {
+        (0..self.indices.len()).map(|i| self.triangle_area(i) as f64).sum()
     }
 }
 
@@ -96,10 +273,18 @@ pub struct Scene {
     /// The scene file's sample count, if it names one.
     pub spp: Option<u32>,
     pub meshes: Vec<Mesh>,
+    /// Images referenced by [`Reflectance::Texture`], each loaded once.
+    pub textures: Vec<Texture>,
+    /// Light from where rays leave the scene, if any.
+    pub environment: Option<Environment>,
+    /// What the loader did not support and what it used instead, one line each
+    /// (`file:line: ...`). Nothing is dropped without an entry here.
+    pub warnings: Vec<String>,
 }
 
 impl Scene {
-    /// Loads a scene file; the format is chosen by extension (`.xml`: Mitsuba).
+    /// Loads a scene file; the format is chosen by extension: `.xml` (Mitsuba 0.6, 2 or 3),
+    /// `.obj` (Wavefront OBJ with its MTL materials), `.gltf`/`.glb` (glTF 2.0).
     pub fn load(path: &std::path::Path) -> Result<Scene, crate::SceneError> {
         match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
             Some("xml") => {
@@ -107,7 +292,13 @@ impl Scene {
                     .map_err(|e| crate::SceneError::new(path, None, format!("cannot read scene file: {e}")))?;
                 Scene::from_mitsuba_str(&text, path)
             }
-            _ => Err(crate::SceneError::new(path, None, "unknown scene format: hush reads Mitsuba XML scenes (.xml)")),
+            Some("obj") => crate::obj::load_obj_scene(path),
+            Some("gltf" | "glb") => crate::gltf::load_gltf(path),
+            _ => Err(crate::SceneError::new(
+                path,
+                None,
+                "unknown scene format: hush reads Mitsuba XML (.xml), Wavefront OBJ (.obj) and glTF 2.0 (.gltf, .glb)",
+            )),
         }
     }
 

@@ -1,18 +1,38 @@
-use std::path::Path;
+//! Wavefront OBJ: meshes for Mitsuba's `obj` shape, and standalone `.obj` scenes with their
+//! MTL materials.
 
-use glam::Vec3;
+use std::collections::HashMap;
+use std::io::BufReader;
+use std::path::{Path, PathBuf};
 
-use crate::{Material, Mesh, SceneError};
+use glam::{Vec2, Vec3};
 
-/// Loads every object of a Wavefront OBJ file as one triangle mesh with the given material.
-///
-/// Polygons are triangulated; vertex normals are kept when every vertex has one.
-/// Non-finite positions or normals, out-of-range indices and an empty file are errors
-/// naming the file; degenerate (zero-area) triangles are dropped, since they can never be hit.
-pub fn load_obj(path: &Path, material: Material) -> Result<Mesh, SceneError> {
-    if !path.is_file() {
-        return Err(SceneError::new(path, None, "mesh file not found: check the path in the scene file"));
-    }
+use crate::shapes::Geometry;
+use crate::texture::TextureCache;
+use crate::{Film, Material, Mesh, Reflectance, Scene, SceneError};
+
+/// One object (or one material run of an object) of an OBJ file.
+pub(crate) struct ObjObject {
+    pub name: String,
+    pub geometry: Geometry,
+    pub material: Option<usize>,
+}
+
+pub(crate) struct ObjFile {
+    pub objects: Vec<ObjObject>,
+    pub materials: Vec<tobj::Material>,
+    pub warnings: Vec<String>,
+}
+
+/// Reads an OBJ file: polygons triangulated, normals kept when every vertex of an object has
+/// one, texture coordinates flipped to hush's v-down convention (Mitsuba's `flip_tex_coords`).
+/// `mtl` reads the `mtllib` files; otherwise they are only checked for existence, since a
+/// Mitsuba scene gives the materials itself. A missing material library is a warning.
+pub(crate) fn read_obj(path: &Path, mtl: bool) -> Result<ObjFile, SceneError> {
+    let file = std::fs::File::open(path).map_err(|e| {
+        let hint = if path.exists() { e.to_string() } else { "mesh file not found".into() };
+        SceneError::new(path, None, format!("{hint}: check the path in the scene file"))
+    })?;
     let options = tobj::LoadOptions {
         single_index: true,
         triangulate: true,
@@ -20,72 +40,250 @@ pub fn load_obj(path: &Path, material: Material) -> Result<Mesh, SceneError> {
         ignore_lines: true,
         ..Default::default()
     };
-    // Materials of Mitsuba scenes live in the scene file, so the OBJ's own `mtllib` is not read.
-    let (models, _materials) =
-        tobj::load_obj(path, &options).map_err(|e| SceneError::new(path, None, format!("malformed OBJ: {e}")))?;
+    let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let warnings = std::cell::RefCell::new(Vec::new());
+    let (models, materials) = tobj::load_obj_buf(&mut BufReader::new(file), &options, |lib| {
+        let full = dir.join(lib);
+        if !full.is_file() {
+            let used = if mtl {
+                "its objects get Mitsuba's default diffuse 0.5"
+            } else {
+                "not needed: the scene file gives the BSDF"
+            };
+            warnings.borrow_mut().push(format!(
+                "{}: material library '{}' is missing ({used})",
+                path.display(),
+                lib.display()
+            ));
+            return Ok((Vec::new(), Default::default()));
+        }
+        if mtl { tobj::load_mtl(&full) } else { Ok((Vec::new(), Default::default())) }
+    })
+    .map_err(|e| SceneError::new(path, None, format!("malformed OBJ: {e}")))?;
+    let materials =
+        materials.map_err(|e| SceneError::new(path, None, format!("malformed MTL material library: {e}")))?;
 
-    let mut positions = Vec::new();
-    let mut normals = Vec::new();
-    let mut indices = Vec::new();
-    let mut all_have_normals = true;
-    for model in &models {
-        let m = &model.mesh;
-        let base = positions.len() as u32;
+    let mut objects = Vec::with_capacity(models.len());
+    for model in models {
+        let m = model.mesh;
         let count = m.positions.len() / 3;
-        for (k, p) in m.positions.chunks_exact(3).enumerate() {
-            let v = Vec3::new(p[0], p[1], p[2]);
-            if !v.is_finite() {
-                return Err(SceneError::new(
-                    path,
-                    None,
-                    format!(
-                        "vertex {} of object '{}' is not finite ({v}): fix or re-export the mesh",
-                        k + 1,
-                        model.name
-                    ),
-                ));
-            }
-            positions.push(v);
-        }
-        if m.normals.len() == m.positions.len() {
-            for n in m.normals.chunks_exact(3) {
-                let v = Vec3::new(n[0], n[1], n[2]);
-                if !v.is_finite() {
-                    return Err(SceneError::new(
-                        path,
-                        None,
-                        format!("object '{}' has a non-finite normal", model.name),
-                    ));
-                }
-                normals.push(v);
-            }
-        } else {
-            all_have_normals = false;
-        }
-        for t in m.indices.chunks_exact(3) {
-            if t.iter().any(|&i| i as usize >= count) {
-                return Err(SceneError::new(
-                    path,
-                    None,
-                    format!("object '{}' has a face index out of range", model.name),
-                ));
-            }
-            indices.push([base + t[0], base + t[1], base + t[2]]);
-        }
+        let positions: Vec<Vec3> = m.positions.chunks_exact(3).map(|p| Vec3::new(p[0], p[1], p[2])).collect();
+        let normals = (m.normals.len() == 3 * count && count > 0)
+            .then(|| m.normals.chunks_exact(3).map(|n| Vec3::new(n[0], n[1], n[2])).collect());
+        let uvs = (m.texcoords.len() == 2 * count && count > 0)
+            .then(|| m.texcoords.chunks_exact(2).map(|t| Vec2::new(t[0], 1.0 - t[1])).collect());
+        let indices = m.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+        objects.push(ObjObject {
+            name: model.name,
+            geometry: Geometry { positions, normals, uvs, indices },
+            material: m.material_id,
+        });
     }
-    indices.retain(|t| {
-        let [a, b, c] = t.map(|i| positions[i as usize]);
-        (b - a).cross(c - a).length_squared() > 0.0
-    });
-    if indices.is_empty() {
+    Ok(ObjFile { objects, materials, warnings: warnings.into_inner() })
+}
+
+/// All objects of an OBJ file as one geometry. Normals (UVs) are kept only if every object has them.
+pub(crate) fn merge(objects: Vec<ObjObject>) -> Geometry {
+    let all_normals = objects.iter().all(|o| o.geometry.normals.is_some());
+    let all_uvs = objects.iter().all(|o| o.geometry.uvs.is_some());
+    let mut g = Geometry { normals: all_normals.then(Vec::new), uvs: all_uvs.then(Vec::new), ..Default::default() };
+    for o in objects {
+        let base = g.positions.len() as u32;
+        g.positions.extend(o.geometry.positions);
+        if let (Some(n), Some(src)) = (&mut g.normals, o.geometry.normals) {
+            n.extend(src);
+        }
+        if let (Some(u), Some(src)) = (&mut g.uvs, o.geometry.uvs) {
+            u.extend(src);
+        }
+        g.indices.extend(o.geometry.indices.iter().map(|t| t.map(|i| i + base)));
+    }
+    g
+}
+
+/// Loads every object of a Wavefront OBJ file as one triangle mesh with the given material.
+///
+/// Polygons are triangulated; vertex normals and texture coordinates are kept when every vertex
+/// has one. Non-finite positions or normals, out-of-range indices and an empty file are errors
+/// naming the file; degenerate (zero-area) triangles are dropped, since they can never be hit.
+pub fn load_obj(path: &Path, material: Material) -> Result<Mesh, SceneError> {
+    let file = read_obj(path, false)?;
+    let mut geometry = merge(file.objects);
+    geometry.check().map_err(|m| SceneError::new(path, None, m))?;
+    if geometry.indices.is_empty() {
         return Err(SceneError::new(path, None, "OBJ file holds no (non-degenerate) triangles"));
     }
     Ok(Mesh {
         name: path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
-        positions,
-        normals: all_have_normals.then_some(normals),
-        indices,
+        positions: geometry.positions,
+        normals: geometry.normals,
+        uvs: geometry.uvs,
+        indices: geometry.indices,
         material,
         emission: None,
     })
+}
+
+/// A standalone `.obj` scene: one mesh per object and material, materials from the MTL files
+/// (see [`mtl_material`]), and a default camera since OBJ has none.
+pub(crate) fn load_obj_scene(path: &Path) -> Result<Scene, SceneError> {
+    let file = read_obj(path, true)?;
+    let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let mut warnings = file.warnings;
+    let mut textures = TextureCache::default();
+    let mut converted: HashMap<usize, (Material, Option<Vec3>)> = HashMap::new();
+    let mut meshes = Vec::new();
+    for object in file.objects {
+        let (material, emission) = match object.material {
+            Some(i) => match converted.get(&i) {
+                Some(&m) => m,
+                None => {
+                    let m = mtl_material(&file.materials[i], &dir, &mut textures, &mut warnings, path);
+                    converted.insert(i, m);
+                    m
+                }
+            },
+            None => (Material::DEFAULT, None),
+        };
+        let mut g = object.geometry;
+        let dropped = g.check().map_err(|m| SceneError::new(path, None, format!("object '{}': {m}", object.name)))?;
+        if dropped > 0 {
+            warnings.push(format!(
+                "{}: object '{}': dropped {dropped} degenerate triangles",
+                path.display(),
+                object.name
+            ));
+        }
+        if g.indices.is_empty() {
+            if emission.is_some() {
+                return Err(SceneError::new(
+                    path,
+                    None,
+                    format!("object '{}' emits light but has zero area: remove its Ke or fix the mesh", object.name),
+                ));
+            }
+            warnings.push(format!("{}: object '{}' has no area and was dropped", path.display(), object.name));
+            continue;
+        }
+        meshes.push(Mesh {
+            name: object.name,
+            positions: g.positions,
+            normals: g.normals,
+            uvs: g.uvs,
+            indices: g.indices,
+            material,
+            emission,
+        });
+    }
+    if meshes.is_empty() {
+        return Err(SceneError::new(path, None, "OBJ file holds no (non-degenerate) triangles"));
+    }
+    let film = Film { width: 768, height: 576 };
+    let mut scene = Scene {
+        camera: crate::model::Camera { origin: Vec3::Z, target: Vec3::ZERO, up: Vec3::Y, fov_y_deg: 40.0 },
+        film,
+        max_depth: u32::MAX,
+        spp: None,
+        meshes,
+        textures: textures.textures,
+        environment: None,
+        warnings,
+    };
+    scene.camera = framing_camera(&scene, film, 40.0);
+    scene.warnings.push(format!(
+        "{}: OBJ has no camera: hush looks at the geometry's centre from +z with a {}° vertical fov (override with --origin/--target/--fov)",
+        path.display(),
+        40
+    ));
+    Ok(scene)
+}
+
+/// A camera on the +z side of the scene's bounds looking at their centre, far enough for the
+/// bounding sphere to fit the vertical field of view.
+pub(crate) fn framing_camera(scene: &Scene, film: Film, fov_y_deg: f32) -> crate::Camera {
+    let (lo, hi) = scene.bounds();
+    let center = (lo + hi) * 0.5;
+    let radius = ((hi - lo).length() * 0.5).max(1e-3);
+    let aspect = film.width as f32 / film.height as f32;
+    let half = (fov_y_deg.to_radians() * 0.5).tan() * aspect.min(1.0);
+    let distance = radius / half.atan().sin();
+    crate::Camera { origin: center + Vec3::Z * distance, target: center, up: Vec3::Y, fov_y_deg }
+}
+
+/// MTL → hush material. OBJ has no notion of sides, so every material is two-sided; `Ke`
+/// emits from the front.
+///
+/// - `illum` 4, 6, 7 or 9 (refraction): a dielectric of IOR `Ni` (default 1.5), rough with `Pr`.
+/// - `illum` 3 or 5 (ray-traced reflection) or `Pm` ≥ 0.5: a conductor that reflects `Ks`
+///   (Fresnel factor 1), GGX alpha from `Pr`, else from `Ns` as √(2 / (Ns + 2)).
+/// - otherwise `Kd` (or `map_Kd`) alone is diffuse; with a non-zero `Ks` it is a rough plastic:
+///   `Kd` under a coating of IOR `Ni` (default 1.5) scaled by `Ks`, alpha from `Ns` or `Pr`.
+pub(crate) fn mtl_material(
+    m: &tobj::Material,
+    dir: &Path,
+    textures: &mut TextureCache,
+    warnings: &mut Vec<String>,
+    obj: &Path,
+) -> (Material, Option<Vec3>) {
+    let at = |msg: String| format!("{}: material '{}': {msg}", obj.display(), m.name);
+    let kd = m.diffuse.map(Vec3::from).unwrap_or(Vec3::splat(0.5));
+    let ks = m.specular.map(Vec3::from).unwrap_or(Vec3::ZERO);
+    let param = |k: &str| m.unknown_param.get(k).and_then(|v| v.trim().parse::<f32>().ok()).filter(|v| v.is_finite());
+    let pr = param("Pr");
+    let pm = param("Pm").unwrap_or(0.0);
+    let alpha = match (pr, m.shininess) {
+        (Some(r), _) => r.clamp(0.0, 1.0),
+        (None, Some(ns)) if ns > 0.0 => (2.0 / (ns + 2.0)).sqrt(),
+        _ => 0.0,
+    };
+    let mut diffuse: Reflectance = kd.clamp(Vec3::ZERO, Vec3::ONE).into();
+    if let Some(t) = &m.diffuse_texture {
+        let file: PathBuf = dir.join(t.trim());
+        match textures.get(&file, false) {
+            Ok(id) => diffuse = Reflectance::Texture(id),
+            Err(e) => warnings.push(at(format!("{e}; Kd is used instead"))),
+        }
+    }
+    if m.dissolve.is_some_and(|d| d < 1.0) {
+        warnings.push(at("transparency (d < 1) is not supported yet: the surface is opaque".into()));
+    }
+    for unsupported in
+        [&m.specular_texture, &m.normal_texture, &m.shininess_texture, &m.dissolve_texture, &m.ambient_texture]
+    {
+        if let Some(t) = unsupported {
+            warnings.push(at(format!("texture '{t}' is ignored (hush reads map_Kd only)")));
+        }
+    }
+    let emission = m.emissive.map(Vec3::from).filter(|e| e.max_element() > 0.0);
+    let ior = m.optical_density.filter(|n| *n > 0.0).unwrap_or(1.5);
+    let material = match m.illumination_model {
+        Some(4 | 6 | 7 | 9) => Material::Dielectric {
+            alpha: pr.unwrap_or(0.0),
+            int_ior: ior,
+            ext_ior: 1.0,
+            thin: false,
+            specular_reflectance: Vec3::ONE,
+            specular_transmittance: Vec3::ONE,
+        },
+        Some(3 | 5) => {
+            Material::Conductor { alpha, ior: None, specular_reflectance: ks.min(Vec3::ONE), two_sided: true }
+        }
+        _ if pm >= 0.5 => Material::Conductor {
+            alpha,
+            ior: None,
+            specular_reflectance: if ks.max_element() > 0.0 { ks } else { kd }.min(Vec3::ONE),
+            two_sided: true,
+        },
+        _ if ks.max_element() > 0.0 => Material::Plastic {
+            diffuse_reflectance: diffuse,
+            specular_reflectance: ks.min(Vec3::ONE),
+            alpha,
+            int_ior: ior,
+            ext_ior: 1.0,
+            nonlinear: false,
+            two_sided: true,
+        },
+        _ => Material::Diffuse { reflectance: diffuse, two_sided: true },
+    };
+    (material, emission)
 }

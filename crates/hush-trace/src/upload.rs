@@ -2,7 +2,7 @@
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
-use hush_scene::{Bvh, BvhNode, Material, Scene};
+use hush_scene::{Bvh, BvhNode, Environment, Material, Reflectance, Scene};
 
 use crate::TraceError;
 
@@ -74,8 +74,28 @@ pub(crate) fn flatten(scene: &Scene) -> Result<GpuScene, TraceError> {
     let mut normals = Vec::with_capacity(scene.triangle_count());
     let mut materials = Vec::with_capacity(scene.meshes.len());
     let mut light_weights = Vec::new();
+    if let Some(env) = &scene.environment {
+        let what = match env {
+            Environment::Constant { .. } => "constant",
+            Environment::Map(_) => "envmap",
+        };
+        return Err(TraceError::Invalid(format!("emitter '{what}' is not supported by the kernel yet")));
+    }
     for (mi, mesh) in scene.meshes.iter().enumerate() {
-        let Material::Diffuse { reflectance } = mesh.material;
+        let reflectance = match mesh.material {
+            Material::Diffuse { reflectance: Reflectance::Rgb(r), two_sided: false } => r,
+            m => {
+                let what = match m {
+                    Material::Diffuse { two_sided: true, .. } => "twosided diffuse".to_string(),
+                    Material::Diffuse { .. } => "textured diffuse".to_string(),
+                    m => m.kind().to_string(),
+                };
+                return Err(TraceError::Invalid(format!(
+                    "material '{what}' of shape '{}' is not supported by the kernel yet",
+                    mesh.name
+                )));
+            }
+        };
         let emission = mesh.emission.unwrap_or(Vec3::ZERO);
         let emits = emission.max_element() > 0.0;
         materials.push(GpuMaterial { reflectance: v4(reflectance, 0.0), emission: v4(emission, emits as u32 as f32) });

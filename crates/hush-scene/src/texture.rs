@@ -1,0 +1,107 @@
+//! Reading images into linear RGB floats: textures (PNG, JPEG, ... through `image`; EXR through
+//! `exr`) and environment maps (EXR).
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use crate::{Texture, TextureId};
+
+/// An image as linear RGB floats, rows top to bottom.
+pub(crate) struct Pixels {
+    pub width: u32,
+    pub height: u32,
+    pub data: Vec<f32>,
+}
+
+/// sRGB's transfer function, decoded (IEC 61966-2-1).
+pub(crate) fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
+}
+
+/// Reads an image file. 8- and 16-bit images are sRGB-encoded unless `raw` (Mitsuba's
+/// `bitmap` default: `raw = false`) and are converted to linear; EXR and other float images
+/// are linear already. Alpha is dropped. Errors name the file.
+pub(crate) fn read_image(path: &Path, raw: bool) -> Result<Pixels, String> {
+    if !path.is_file() {
+        return Err(format!("image file not found: {}: check the path in the scene file", path.display()));
+    }
+    let is_exr = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr"));
+    let pixels = if is_exr {
+        read_exr(path)?
+    } else {
+        let img = image::ImageReader::open(path)
+            .and_then(|r| r.with_guessed_format())
+            .map_err(|e| format!("cannot read image {}: {e}", path.display()))?
+            .decode()
+            .map_err(|e| format!("cannot decode image {}: {e} (hush reads PNG, JPEG and EXR)", path.display()))?;
+        let (width, height) = (img.width(), img.height());
+        let data = match img.color() {
+            image::ColorType::Rgb32F | image::ColorType::Rgba32F => img.to_rgb32f().into_raw(),
+            image::ColorType::L8 | image::ColorType::La8 | image::ColorType::Rgb8 | image::ColorType::Rgba8 => {
+                let lut: Vec<f32> =
+                    (0..256).map(|i| if raw { i as f32 / 255.0 } else { srgb_to_linear(i as f32 / 255.0) }).collect();
+                img.to_rgb8().into_raw().into_iter().map(|v| lut[v as usize]).collect()
+            }
+            _ => {
+                let mut d = img.to_rgb32f().into_raw();
+                if !raw {
+                    d.iter_mut().for_each(|v| *v = srgb_to_linear(*v));
+                }
+                d
+            }
+        };
+        Pixels { width, height, data }
+    };
+    if let Some(i) = pixels.data.iter().position(|v| !v.is_finite()) {
+        let px = i / 3;
+        return Err(format!(
+            "image {} has a non-finite value at pixel ({}, {}): fix the file",
+            path.display(),
+            px % pixels.width as usize,
+            px / pixels.width as usize
+        ));
+    }
+    if pixels.width == 0 || pixels.height == 0 {
+        return Err(format!("image {} is empty", path.display()));
+    }
+    Ok(pixels)
+}
+
+fn read_exr(path: &Path) -> Result<Pixels, String> {
+    use exr::prelude::*;
+    let image = read_first_rgba_layer_from_file(
+        path,
+        |resolution, _| (resolution.width(), vec![0f32; resolution.width() * resolution.height() * 3]),
+        |(w, data), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+            let i = 3 * (pos.y() * *w + pos.x());
+            data[i] = r;
+            data[i + 1] = g;
+            data[i + 2] = b;
+        },
+    )
+    .map_err(|e| format!("cannot read EXR {}: {e} (hush needs R, G and B channels)", path.display()))?;
+    let size = image.layer_data.size;
+    let (_, data) = image.layer_data.channel_data.pixels;
+    Ok(Pixels { width: size.width() as u32, height: size.height() as u32, data })
+}
+
+/// Textures of one scene, each file read once.
+#[derive(Default)]
+pub(crate) struct TextureCache {
+    pub textures: Vec<Texture>,
+    by_path: HashMap<(PathBuf, bool), TextureId>,
+}
+
+impl TextureCache {
+    pub fn get(&mut self, path: &Path, raw: bool) -> Result<TextureId, String> {
+        let key = (path.to_path_buf(), raw);
+        if let Some(&id) = self.by_path.get(&key) {
+            return Ok(id);
+        }
+        let px = read_image(path, raw)?;
+        let id = TextureId(self.textures.len() as u32);
+        self.textures.push(Texture { path: path.to_path_buf(), width: px.width, height: px.height, data: px.data });
+        self.by_path.insert(key, id);
+        Ok(id)
+    }
+}

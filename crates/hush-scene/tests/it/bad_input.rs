@@ -1,0 +1,126 @@
+//! What is not supported is a warning naming it; malformed input is an error naming file and line.
+
+use hush_scene::Scene;
+
+use crate::{load_err, load_xml, scene3, scratch};
+
+const RECT: &str = r#"<shape type="rectangle"/>"#;
+
+/// Loads `body` (plus a rectangle) and returns the warnings.
+fn warnings(dir: &std::path::Path, body: &str) -> Vec<String> {
+    load_xml(dir, &scene3(&format!("{RECT}\n{body}"))).warnings
+}
+
+fn assert_warned(warnings: &[String], words: &[&str]) {
+    assert!(warnings.iter().any(|w| words.iter().all(|k| w.contains(k))), "no warning with {words:?} in {warnings:?}");
+}
+
+#[test]
+fn unsupported_elements_are_named_warnings() {
+    let dir = scratch("unsupported");
+    // The body starts on line 6 (after the scene line, the sensor's 3 lines and the rectangle).
+    assert_warned(&warnings(&dir, r#"<emitter type="point"/>"#), &["scene.xml:6:", "emitter 'point'"]);
+    assert_warned(
+        &warnings(&dir, r#"<medium type="homogeneous"/>"#),
+        &["scene.xml:6:", "<medium type=\"homogeneous\">"],
+    );
+    assert_warned(
+        &warnings(&dir, r#"<shape type="ply"><string name="filename" value="x.ply"/></shape>"#),
+        &["shape type 'ply'", "skipped"],
+    );
+    assert_warned(
+        &warnings(&dir, r#"<shape type="cube"><bsdf type="principled"/></shape>"#),
+        &["BSDF 'principled'", "diffuse"],
+    );
+    assert_warned(
+        &warnings(
+            &dir,
+            r#"<shape type="cube"><bsdf type="roughconductor"><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.4"/></bsdf></shape>"#,
+        ),
+        &["anisotropic", "0.2"],
+    );
+    let xml = r#"<scene version="3.0.0"><sensor type="perspective"><float name="fov" value="40"/>
+      <transform name="to_world"><lookat origin="0,0,4" target="0,0,0"/></transform>
+      <sampler type="stratified"/>
+      <film type="hdrfilm"><rfilter type="gaussian"/></film></sensor><shape type="cube"/></scene>"#;
+    let w = load_xml(&dir, xml).warnings;
+    assert_warned(&w, &["scene.xml:4:", "gaussian", "box filter"]);
+    assert_warned(&w, &["scene.xml:3:", "stratified", "independently"]);
+}
+
+#[test]
+fn malformed_values_are_errors_with_the_line() {
+    let dir = scratch("malformed-values");
+    let err = load_err(&dir, &scene3("<shape type=\"sphere\">\n<float name=\"radius\" value=\"one\"/></shape>"));
+    assert!(err.contains("scene.xml:6:") && err.contains("'one'"), "{err}");
+    let err = load_err(
+        &dir,
+        &scene3(r#"<shape type="rectangle"><transform name="to_world"><translate x="$dx"/></transform></shape>"#),
+    );
+    assert!(err.contains("scene.xml:5:") && err.contains("$dx") && err.contains("<default"), "{err}");
+    let err =
+        load_err(&dir, &scene3(r#"<shape type="rectangle"><transform name="to_world"><shear/></transform></shape>"#));
+    assert!(err.contains("<shear>") && err.contains("not a transform"), "{err}");
+    let err = load_err(
+        &dir,
+        &scene3(r#"<bsdf type="conductor" id="c"><string name="material" value="Unobtainium"/></bsdf>"#),
+    );
+    assert!(err.contains("Unobtainium") && err.contains("Cu"), "{err}");
+    let err =
+        load_err(&dir, &scene3(r#"<bsdf type="dielectric" id="d"><string name="int_ior" value="jelly"/></bsdf>"#));
+    assert!(err.contains("jelly") && err.contains("bk7"), "{err}");
+}
+
+#[test]
+fn named_iors_and_metals() {
+    let dir = scratch("named");
+    let s = load_xml(
+        &dir,
+        &scene3(
+            r#"<shape type="cube"><bsdf type="dielectric"><string name="int_ior" value="water"/><string name="ext_ior" value="air"/></bsdf></shape>
+               <shape type="cube"><bsdf type="conductor"><string name="material" value="Au"/></bsdf></shape>"#,
+        ),
+    );
+    assert!(
+        matches!(s.meshes[0].material, hush_scene::Material::Dielectric { int_ior, ext_ior, .. } if int_ior == 1.333 && ext_ior == 1.00028)
+    );
+    let hush_scene::Material::Conductor { ior: Some(ior), .. } = s.meshes[1].material else { panic!() };
+    assert_eq!(ior.eta.x, 0.1431189557);
+}
+
+#[test]
+fn missing_mesh_beside_others_is_a_warning_naming_it() {
+    let dir = scratch("missing-mesh-warning");
+    let w = warnings(&dir, r#"<shape type="obj" id="water"><string name="filename" value="models/gone.obj"/></shape>"#);
+    assert_warned(&w, &["scene.xml:6:", "'water'", "gone.obj", "not found"]);
+}
+
+#[test]
+fn missing_texture_is_a_warning_naming_it() {
+    let dir = scratch("missing-texture");
+    let w = warnings(
+        &dir,
+        r#"<shape type="cube"><bsdf type="diffuse"><texture type="bitmap" name="reflectance"><string name="filename" value="tex/gone.png"/></texture></bsdf></shape>"#,
+    );
+    assert_warned(&w, &["gone.png", "not found", "0.5 grey"]);
+}
+
+#[test]
+fn zero_area_light_is_an_error() {
+    let dir = scratch("zero-area-light");
+    let err = load_err(
+        &dir,
+        &scene3(
+            r#"<shape type="rectangle" id="lamp"><transform name="to_world"><scale x="0"/></transform><emitter type="area"><rgb name="radiance" value="1"/></emitter></shape>"#,
+        ),
+    );
+    assert!(err.contains("scene.xml:5:") && err.contains("'lamp'") && err.contains("zero area"), "{err}");
+}
+
+#[test]
+fn nan_vertex_in_obj_scene_is_an_error() {
+    let dir = scratch("nan-obj-scene");
+    std::fs::write(dir.join("bad.obj"), "v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let err = Scene::load(&dir.join("bad.obj")).unwrap_err().to_string();
+    assert!(err.contains("bad.obj") && err.contains("not finite"), "{err}");
+}
