@@ -3,6 +3,7 @@
 
 mod bench;
 mod demo;
+mod mitsuba;
 mod test;
 mod util;
 
@@ -12,7 +13,11 @@ const USAGE: &str = "usage: cargo xtask <task>
 tasks:
   test [cargo test args]     install a Vulkan driver if none is present, then run every test
   demo [--release]           render → dataset → train → eval → report on the bundled Cornell box
-  bench render [--release]   M paths per CPU-second on the Cornell box, 512², max_depth 8";
+  bench render [--release] [--spp N]
+                             M paths per CPU-second and relMSE × CPU-seconds on the Cornell box
+                             (512², max_depth 8), hush against Mitsuba 3 when it is installed
+  mitsuba setup              install Mitsuba 3 (PyPI) into target/mitsuba-venv and verify it renders
+  mitsuba references         re-render the references of data/tests/mitsuba with Mitsuba 3";
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -20,6 +25,7 @@ fn main() -> ExitCode {
         Some("demo") => demo::run(&args[1..]),
         Some("bench") => bench::run(&args[1..]),
         Some("test") => test::run(&args[1..]),
+        Some("mitsuba") => mitsuba::run(&args[1..]),
         _ => Err(USAGE.to_string()),
     };
     match result {

@@ -57,6 +57,31 @@ pub fn spawn(cmd: &mut Command) -> Result<()> {
     Ok(())
 }
 
+/// Runs a command, echoing it, and returns its standard output (standard error passes through).
+pub fn output(cmd: &mut Command) -> Result<String> {
+    let shown = format!(
+        "{} {}",
+        cmd.get_program().to_string_lossy(),
+        cmd.get_args().map(|a| a.to_string_lossy()).collect::<Vec<_>>().join(" ")
+    );
+    eprintln!("$ {shown}");
+    let out = cmd
+        .stderr(std::process::Stdio::inherit())
+        .output()
+        .map_err(|e| format!("cannot start `{shown}`: {e}"))?;
+    if !out.status.success() {
+        return Err(format!("`{shown}` failed ({})", out.status));
+    }
+    String::from_utf8(out.stdout).map_err(|e| format!("`{shown}` printed non-UTF-8: {e}"))
+}
+
+/// The 1-, 5- and 15-minute load averages (`uptime`), to judge how busy the machine was.
+pub fn load_average() -> serde_json::Value {
+    let text = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
+    let v: Vec<f64> = text.split_whitespace().take(3).filter_map(|s| s.parse().ok()).collect();
+    if v.len() == 3 { serde_json::json!(v) } else { serde_json::Value::Null }
+}
+
 /// Makes sure a Vulkan driver is installed: lavapipe (Mesa's CPU Vulkan) on Debian when
 /// none is, with the one command that does it.
 pub fn ensure_vulkan() -> Result<()> {
@@ -76,13 +101,17 @@ pub fn ensure_vulkan() -> Result<()> {
         return Ok(());
     }
     const INSTALL: &str = "apt-get install -y libvulkan1 mesa-vulkan-drivers";
-    let root = Command::new("id").arg("-u").output().map(|o| o.stdout.starts_with(b"0")).unwrap_or(false);
-    if root && Path::new("/usr/bin/apt-get").exists() {
+    if is_root() && Path::new("/usr/bin/apt-get").exists() {
         eprintln!("xtask: no Vulkan driver found; installing Mesa's CPU driver (lavapipe): {INSTALL}");
         spawn(Command::new("apt-get").args(["update", "-qq"]))?;
         return spawn(Command::new("apt-get").args(["install", "-y", "-qq", "libvulkan1", "mesa-vulkan-drivers"]));
     }
     Err(format!("no Vulkan driver found: install one, e.g. `sudo {INSTALL}` (Mesa's CPU driver, lavapipe)"))
+}
+
+/// Whether we run as root (and so may install system packages with apt-get).
+pub fn is_root() -> bool {
+    Command::new("id").arg("-u").output().map(|o| o.stdout.trim_ascii() == b"0").unwrap_or(false)
 }
 
 /// Reads a JSON file written by `hush`.
