@@ -226,3 +226,212 @@ fn pipeline_runs_end_to_end() {
     assert!(methods.contains(&"noisy") && methods.contains(&"run/model"), "{methods:?}");
     assert!(report.join("report.md").is_file());
 }
+
+/// A second small scene for dataset tests: the Cornell box's meshes with a bluish light.
+fn blue_box(dir: &Path) -> PathBuf {
+    let cbox_dir = repo().join("data/scenes/cbox");
+    let xml = std::fs::read_to_string(cbox()).unwrap();
+    let mut out = String::new();
+    for line in xml.lines() {
+        let line = match line.find("value=\"").map(|i| i + 7) {
+            Some(i) if line.contains("name=\"filename\"") => {
+                format!("{}{}/{}", &line[..i], cbox_dir.display(), &line[i..])
+            }
+            _ => line.replace("18.387, 13.9873, 6.75357", "6, 12, 20"),
+        };
+        out.push_str(&line);
+        out.push('\n');
+    }
+    assert!(out.contains("6, 12, 20"), "the light of the Cornell box changed; update this test");
+    let scene = dir.join("blue-box/scene.xml");
+    std::fs::create_dir_all(scene.parent().unwrap()).unwrap();
+    std::fs::write(&scene, out).unwrap();
+    scene
+}
+
+fn manifest_of(dir: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("manifest.json")).unwrap()).unwrap()
+}
+
+/// Two scenes (one found by scanning a folder) × two views at 64²: names as OIDN's toolkit expects,
+/// the split by scene, the reference check recorded, `check` passes; then `check` catches damage, and a
+/// re-run repairs exactly the damaged file.
+#[test]
+fn dataset_of_two_scenes_passes_check() {
+    let dir = scratch("dataset-two");
+    let scenes = dir.join("scenes");
+    blue_box(&scenes);
+    std::fs::create_dir_all(scenes.join("broken")).unwrap();
+    std::fs::write(scenes.join("broken/scene.xml"), "<scene version=\"3.0.0\"><shape type=\"cube\"/></scene>").unwrap();
+    let ds = dir.join("ds");
+    let cbox = cbox();
+    let args = [
+        "dataset",
+        s(&cbox),
+        s(&scenes),
+        "--out",
+        s(&ds),
+        "--views",
+        "2",
+        "--spp",
+        "1,4",
+        "--aux-spp",
+        "2",
+        "--ref-spp",
+        "8",
+        "--ref-check-spp",
+        "16",
+        "--size",
+        "64",
+    ];
+    let log = expect_success(&args);
+    assert!(log.contains("skipped") && log.contains("broken/scene.xml"), "{log}");
+    let m = manifest_of(&ds);
+    let views = m["views"].as_array().unwrap();
+    assert_eq!(views.len(), 4);
+    let split_of = |scene: &str| {
+        views.iter().filter(|v| v["scene"] == scene).map(|v| v["split"].as_str().unwrap()).collect::<Vec<_>>()
+    };
+    assert_eq!((split_of("blue-box"), split_of("cbox")), (vec!["train", "train"], vec!["test", "test"]));
+    for v in views {
+        let check = &v["reference"]["check"];
+        assert!(check["rel_mse"].as_f64().unwrap() > 0.0 && check["spp"] == 16, "{v}");
+        assert_eq!(v["reference"]["supersample"], 2);
+    }
+    assert_eq!(m["config"]["skipped"].as_array().unwrap().len(), 1);
+    for file in [
+        "cbox_v001_000004.hdr.exr",
+        "cbox_v001_000004.alb.exr",
+        "cbox_v001_000004.nrm.exr",
+        "blue-box_v000_ref.spec.exr",
+    ] {
+        assert!(ds.join(file).is_file(), "{file} missing");
+    }
+    expect_success(&["dataset", "check", s(&ds)]);
+
+    let mut bad = hush_dataset::read_rgb(ds.join("blue-box_v001_000001.hdr.exr")).unwrap();
+    bad.pixel_mut(3, 4)[2] = f32::NAN;
+    hush_dataset::write_rgb(ds.join("blue-box_v001_000001.hdr.exr"), &bad).unwrap();
+    std::fs::remove_file(ds.join("cbox_v000_ref.nrm.exr")).unwrap();
+    let err = expect_error(&["dataset", "check", s(&ds)]);
+    assert!(err.contains("blue-box_v001_000001.hdr.exr") && err.contains("non-finite"), "{err}");
+    assert!(err.contains("cbox_v000_ref.nrm.exr: missing") && err.contains("2 problem(s)"), "{err}");
+
+    let untouched = std::fs::metadata(ds.join("cbox_v001_ref.hdr.exr")).unwrap().modified().unwrap();
+    expect_success(&args);
+    expect_success(&["dataset", "check", s(&ds)]);
+    assert_eq!(std::fs::metadata(ds.join("cbox_v001_ref.hdr.exr")).unwrap().modified().unwrap(), untouched);
+}
+
+/// Every file recorded in a manifest file, with its inode and modification time.
+#[cfg(unix)]
+fn recorded_files(manifest: &Path, root: &Path) -> Vec<(String, u64, std::time::SystemTime)> {
+    use std::os::unix::fs::MetadataExt;
+    let Ok(text) = std::fs::read_to_string(manifest) else { return Vec::new() };
+    let m: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let mut files = Vec::new();
+    for v in m["views"].as_array().unwrap().iter().chain(m["pending"].as_array().into_iter().flatten()) {
+        for r in v["noisy"].as_array().unwrap() {
+            files.push(r["file"].as_str().unwrap().to_string());
+        }
+        if let Some(f) = v["reference"]["file"].as_str() {
+            files.push(f.to_string());
+        }
+        if let Some(aux) = v["aux"].as_object() {
+            files.extend(["albedo", "normal", "diffuse", "specular"].map(|k| aux[k].as_str().unwrap().to_string()));
+        }
+    }
+    files
+        .into_iter()
+        .map(|f| {
+            let meta = std::fs::metadata(root.join(&f)).unwrap();
+            (f, meta.ino(), meta.modified().unwrap())
+        })
+        .collect()
+}
+
+/// Kill `hush dataset` (SIGKILL) once its first images are recorded; the re-run keeps every recorded image
+/// (same inode and mtime: not re-rendered), leaves no temporary file, and the result passes `check`. Also
+/// renders the same job in two shards and checks the merged manifest.
+#[cfg(unix)]
+#[test]
+fn killed_dataset_resumes_without_rerendering() {
+    let dir = scratch("dataset-kill");
+    let ds = dir.join("ds");
+    let cbox = cbox();
+    let args = [
+        "dataset",
+        s(&cbox),
+        "--out",
+        s(&ds),
+        "--views",
+        "3",
+        "--spp",
+        "1,2,4,8",
+        "--aux-spp",
+        "2",
+        "--ref-spp",
+        "16",
+        "--size",
+        "48",
+    ];
+    let mut child = Command::new(env!("CARGO_BIN_EXE_hush"))
+        .args(args)
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("hush starts");
+    let manifest = ds.join("manifest.json");
+    let mut before = Vec::new();
+    while before.len() < 2 {
+        if let Some(status) = child.try_wait().unwrap() {
+            panic!("hush dataset finished ({status}) before it could be killed; give it more work");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+        before = recorded_files(&manifest, &ds);
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let before = recorded_files(&manifest, &ds);
+    assert!(!before.is_empty());
+    let m = manifest_of(&ds);
+    assert!(m["views"].as_array().unwrap().len() < 3, "killed before the end: {m}");
+
+    expect_success(&args);
+    let after = recorded_files(&manifest, &ds);
+    for file in &before {
+        assert!(after.contains(file), "{} was rendered again after the kill", file.0);
+    }
+    let leftovers: Vec<_> = std::fs::read_dir(&ds)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".tmp"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+    expect_success(&["dataset", "check", s(&ds)]);
+
+    // The same job in two shards into a fresh folder: the merged manifest is the whole dataset.
+    let sharded = dir.join("sharded");
+    for shard in ["0/2", "1/2"] {
+        let mut a: Vec<&str> = args.to_vec();
+        a[3] = s(&sharded);
+        a.extend(["--shard", shard]);
+        expect_success(&a);
+    }
+    assert!(sharded.join("manifest.shard-0-of-2.json").is_file() && !sharded.join("manifest.json").exists());
+    expect_success(&["dataset", "check", s(&sharded)]);
+    expect_success(&["dataset", "merge", s(&sharded)]);
+    // Seeds and cameras agree (render seconds do not).
+    let what = |m: serde_json::Value| -> Vec<String> {
+        m["views"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| {
+                let seeds: Vec<&serde_json::Value> =
+                    v["noisy"].as_array().unwrap().iter().map(|r| &r["seed"]).collect();
+                format!("{} {} {} {:?} {}", v["scene"], v["view"], v["camera"], seeds, v["reference"]["seed"])
+            })
+            .collect()
+    };
+    assert_eq!(what(manifest_of(&ds)), what(manifest_of(&sharded)), "shards render what one run renders");
+}

@@ -20,7 +20,10 @@ use crate::util::{
 pub fn run(args: &[String]) -> Result<()> {
     match args.first().map(String::as_str) {
         Some("render") => render(&args[1..]),
-        _ => Err("usage: cargo xtask bench render [--release] [--spp N] [--no-mitsuba] [--no-build]".into()),
+        Some("dataset") => dataset(&args[1..]),
+        _ => Err("usage: cargo xtask bench render [--release] [--spp N] [--no-mitsuba] [--no-build]\n       \
+                  cargo xtask bench dataset [--release] [--size N] [--views N]"
+            .into()),
     }
 }
 
@@ -146,5 +149,69 @@ fn render(args: &[String]) -> Result<()> {
     write_json(&out, &result)?;
     println!("{}", serde_json::to_string_pretty(&result).expect("serializes"));
     println!("written to {}", out.display());
+    Ok(())
+}
+
+/// `cargo xtask bench dataset`: perspectives per hour of `hush dataset` in its default configuration (spp
+/// ladder 1..256, features at 64 spp, references at 1024 spp with 2×2 supersampling) on the Cornell box,
+/// `--views` perspectives (default 2: the scene camera and one generated view) at `--size`² (default 128;
+/// the cost per perspective grows with the pixel count, so the figure at 512² is reported as an
+/// extrapolation). Wall seconds include scene loading and GPU set-up; the render seconds come from the
+/// manifest.
+fn dataset(args: &[String]) -> Result<()> {
+    ensure_vulkan()?;
+    let hush = build_hush(release(args))?;
+    let num = |flag: &str, default: u32| -> Result<u32> {
+        match args.iter().position(|a| a == flag) {
+            Some(i) => args.get(i + 1).and_then(|s| s.parse().ok()).ok_or_else(|| format!("{flag} needs a number")),
+            None => Ok(default),
+        }
+    };
+    let (size, views) = (num("--size", 128)?, num("--views", 2)?);
+    let dir = target_dir().join("bench");
+    let out = dir.join("dataset-cbox");
+    let _ = std::fs::remove_dir_all(&out);
+    std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
+    let scene = project_root().join("data/scenes/cbox/scene.xml");
+    let load_before = load_average();
+    let start = std::time::Instant::now();
+    spawn(Command::new(&hush).arg("dataset").arg(&scene).arg("--out").arg(&out).args([
+        "--views",
+        &views.to_string(),
+        "--size",
+        &size.to_string(),
+    ]))?;
+    let wall = start.elapsed().as_secs_f64();
+    let manifest = read_json(&out.join("manifest.json"))?;
+    let recorded = manifest["views"].as_array().map_or(0, Vec::len);
+    if recorded != views as usize {
+        return Err(format!("{}: {recorded} views recorded, {views} expected", out.display()));
+    }
+    let mut render_seconds = 0.0;
+    for v in manifest["views"].as_array().into_iter().flatten() {
+        let noisy: f64 = v["noisy"].as_array().into_iter().flatten().filter_map(|r| r["render_seconds"].as_f64()).sum();
+        render_seconds += noisy
+            + v["aux"]["render_seconds"].as_f64().unwrap_or(0.0)
+            + v["reference"]["render_seconds"].as_f64().unwrap_or(0.0);
+    }
+    let per_hour = 3600.0 * views as f64 / wall;
+    let scale = (size as f64 * size as f64) / (512.0 * 512.0);
+    let result = serde_json::json!({
+        "benchmark": "dataset",
+        "scene": "cbox (Mitsuba 3 Cornell box)",
+        "configuration": manifest["config"],
+        "size": size,
+        "views": views,
+        "wall_seconds": wall,
+        "render_seconds": render_seconds,
+        "perspectives_per_hour": per_hour,
+        "perspectives_per_hour_at_512_extrapolated": per_hour * scale,
+        "load_average_before": load_before,
+        "load_average_after": load_average(),
+    });
+    let path = dir.join("dataset.json");
+    write_json(&path, &result)?;
+    println!("{}", serde_json::to_string_pretty(&result).expect("serializes"));
+    println!("written to {}", path.display());
     Ok(())
 }

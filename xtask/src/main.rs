@@ -16,6 +16,8 @@ tasks:
   bench render [--release] [--spp N]
                              M paths per CPU-second and relMSE × CPU-seconds on the Cornell box
                              (512², max_depth 8), hush against Mitsuba 3 when it is installed
+  bench dataset [--size N] [--views N]
+                             perspectives per hour of `hush dataset` (default settings) on the Cornell box
   mitsuba setup              install Mitsuba 3 (PyPI) into target/mitsuba-venv and verify it renders
   mitsuba references         re-render the references of data/tests/mitsuba with Mitsuba 3";
 

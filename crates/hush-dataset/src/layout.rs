@@ -1,8 +1,11 @@
 //! The on-disk dataset: file names (Open Image Denoise's training-toolkit convention) and `manifest.json`.
 //!
 //! ```text
-//! <root>/manifest.json
+//! <root>/manifest.json                    the manifest (see [`crate::Manifest`])
+//! <root>/manifest.shard-2-of-8.json       one shard's part of it (`hush dataset --shard 2/8`)
 //! <root>/<scene>_<view>_000004.hdr.exr     noisy renders, one per spp (R,G,B)
+//! <root>/<scene>_<view>_000004.alb.exr     the same file as `_ref.alb.exr` (a hard link, or a copy where the
+//! <root>/<scene>_<view>_000004.nrm.exr       file system has none), so OIDN's loader finds features per spp
 //! <root>/<scene>_<view>_ref.hdr.exr        the reference (R,G,B)
 //! <root>/<scene>_<view>_ref.alb.exr        clean albedo (R,G,B)
 //! <root>/<scene>_<view>_ref.nrm.exr        clean shading normal (R,G,B = x,y,z)
@@ -15,9 +18,7 @@
 
 use std::path::{Path, PathBuf};
 
-use serde::{Deserialize, Serialize};
-
-use crate::{Error, Image, Result, check_finite, read_rgb, write_atomic};
+use crate::{Error, Image, Result, ViewRecord, check_finite, read_rgb};
 
 /// Where the files of a dataset live and what they are called.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -36,6 +37,8 @@ pub enum AuxKind {
 
 impl AuxKind {
     pub const ALL: [AuxKind; 4] = [AuxKind::Albedo, AuxKind::Normal, AuxKind::Diffuse, AuxKind::Specular];
+    /// The features OIDN's toolkit reads beside every noisy render.
+    pub const OIDN: [AuxKind; 2] = [AuxKind::Albedo, AuxKind::Normal];
 
     /// The feature part of the file name: `alb`, `nrm`, `diff`, `spec`.
     pub fn extension(self) -> &'static str {
@@ -59,7 +62,31 @@ impl Layout {
 
     /// `<root>/manifest.json`.
     pub fn manifest_path(&self) -> PathBuf {
-        self.root.join(Manifest::FILE_NAME)
+        self.root.join(crate::Manifest::FILE_NAME)
+    }
+
+    /// `<root>/manifest.shard-<index>-of-<count>.json`: the part written by `--shard index/count`.
+    pub fn shard_manifest_path(&self, index: u32, count: u32) -> PathBuf {
+        self.root.join(format!("manifest.shard-{index}-of-{count}.json"))
+    }
+
+    /// The shard parts present in `root`, sorted by name.
+    pub fn shard_manifest_paths(&self) -> Result<Vec<PathBuf>> {
+        let mut parts = Vec::new();
+        let entries = match std::fs::read_dir(&self.root) {
+            Ok(e) => e,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(parts),
+            Err(e) => return Err(Error::file(&self.root, "list the dataset folder", e)),
+        };
+        for entry in entries {
+            let entry = entry.map_err(|e| Error::file(&self.root, "list the dataset folder", e))?;
+            let name = entry.file_name().to_string_lossy().into_owned();
+            if name.starts_with("manifest.shard-") && name.ends_with(".json") {
+                parts.push(entry.path());
+            }
+        }
+        parts.sort();
+        Ok(parts)
     }
 
     /// `<root>/<file>` for a file name stored in the manifest.
@@ -77,6 +104,12 @@ impl Layout {
         format!("{scene}_{view}_ref.hdr.exr")
     }
 
+    /// `<scene>_<view>_<spp:06>.<alb|nrm>.exr`: the clean feature beside a noisy render, where Open Image
+    /// Denoise's training toolkit looks for it.
+    pub fn noisy_aux_name(scene: &str, view: &str, spp: u32, kind: AuxKind) -> String {
+        format!("{scene}_{view}_{spp:06}.{}.exr", kind.extension())
+    }
+
     /// `<scene>_<view>_ref.<alb|nrm|diff|spec>.exr`.
     pub fn aux_name(scene: &str, view: &str, kind: AuxKind) -> String {
         format!("{scene}_{view}_ref.{}.exr", kind.extension())
@@ -91,179 +124,6 @@ impl Layout {
             )));
         }
         Ok(())
-    }
-}
-
-/// `Train` or `Test`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Split {
-    Train,
-    Test,
-}
-
-/// The pinhole camera a view was rendered with.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct CameraRecord {
-    pub origin: [f32; 3],
-    pub target: [f32; 3],
-    pub up: [f32; 3],
-    pub fov_y_deg: f32,
-    pub width: u32,
-    pub height: u32,
-}
-
-/// One rendered image.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct RenderRecord {
-    pub spp: u32,
-    pub seed: u64,
-    /// File name relative to the dataset root.
-    pub file: String,
-    pub render_seconds: f64,
-}
-
-/// The clean auxiliary images of a view, rendered together.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct AuxRecord {
-    pub spp: u32,
-    pub seed: u64,
-    pub render_seconds: f64,
-    pub albedo: String,
-    pub normal: String,
-    pub diffuse: String,
-    pub specular: String,
-}
-
-impl AuxRecord {
-    /// The file of one feature.
-    pub fn file(&self, kind: AuxKind) -> &str {
-        match kind {
-            AuxKind::Albedo => &self.albedo,
-            AuxKind::Normal => &self.normal,
-            AuxKind::Diffuse => &self.diffuse,
-            AuxKind::Specular => &self.specular,
-        }
-    }
-}
-
-/// Everything stored for one camera view of one scene.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct ViewRecord {
-    pub scene: String,
-    pub view: String,
-    pub split: Split,
-    pub camera: CameraRecord,
-    /// Noisy renders, one per spp, sorted by spp.
-    pub noisy: Vec<RenderRecord>,
-    pub reference: RenderRecord,
-    pub aux: AuxRecord,
-}
-
-impl ViewRecord {
-    /// The noisy render at `spp`, if stored.
-    pub fn noisy_at(&self, spp: u32) -> Option<&RenderRecord> {
-        self.noisy.iter().find(|r| r.spp == spp)
-    }
-
-    /// Checks the names and that no spp appears twice.
-    pub fn validate(&self) -> Result<()> {
-        Layout::check_name("scene", &self.scene)?;
-        Layout::check_name("view", &self.view)?;
-        let mut spps: Vec<u32> = self.noisy.iter().map(|r| r.spp).collect();
-        spps.sort_unstable();
-        if let Some(w) = spps.windows(2).find(|w| w[0] == w[1]) {
-            return Err(Error::Dataset(format!(
-                "view {}_{} lists two noisy renders at {} spp",
-                self.scene, self.view, w[0]
-            )));
-        }
-        Ok(())
-    }
-}
-
-/// `manifest.json` at the dataset root: every view and how it was rendered.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Manifest {
-    pub format_version: u32,
-    pub views: Vec<ViewRecord>,
-}
-
-impl Default for Manifest {
-    fn default() -> Self {
-        Manifest { format_version: Self::FORMAT_VERSION, views: Vec::new() }
-    }
-}
-
-impl Manifest {
-    pub const FORMAT_VERSION: u32 = 1;
-    pub const FILE_NAME: &'static str = "manifest.json";
-
-    /// Reads `<root>/manifest.json`; fails if it is missing, malformed or of another format version.
-    pub fn load(root: impl AsRef<Path>) -> Result<Self> {
-        let path = Layout::new(root.as_ref()).manifest_path();
-        let text = std::fs::read_to_string(&path).map_err(|e| {
-            Error::file(&path, "read the dataset manifest (is this a dataset root? render one first)", e)
-        })?;
-        let manifest: Manifest = serde_json::from_str(&text).map_err(|source| Error::Json {
-            path: path.clone(),
-            action: "parsing",
-            source,
-        })?;
-        if manifest.format_version != Self::FORMAT_VERSION {
-            return Err(Error::Dataset(format!(
-                "{}: format_version {} but this build reads {}; re-create the dataset with this build",
-                path.display(),
-                manifest.format_version,
-                Self::FORMAT_VERSION
-            )));
-        }
-        for v in &manifest.views {
-            v.validate().map_err(|e| Error::Dataset(format!("{}: {e}", path.display())))?;
-        }
-        Ok(manifest)
-    }
-
-    /// Like [`Manifest::load`], but an empty manifest if the file does not exist yet.
-    pub fn load_or_default(root: impl AsRef<Path>) -> Result<Self> {
-        if Layout::new(root.as_ref()).manifest_path().exists() { Self::load(root) } else { Ok(Self::default()) }
-    }
-
-    /// Writes `<root>/manifest.json` atomically (pretty-printed, views sorted by scene and view).
-    pub fn save(&self, root: impl AsRef<Path>) -> Result<()> {
-        let path = Layout::new(root.as_ref()).manifest_path();
-        let mut sorted = self.clone();
-        sorted.views.sort_by(|a, b| (&a.scene, &a.view).cmp(&(&b.scene, &b.view)));
-        let mut text = serde_json::to_string_pretty(&sorted).map_err(|source| Error::Json {
-            path: path.clone(),
-            action: "writing",
-            source,
-        })?;
-        text.push('\n');
-        write_atomic(&path, |tmp| std::fs::write(tmp, &text).map_err(|e| Error::file(&path, "write", e)))
-    }
-
-    /// Inserts `view`, replacing the record with the same scene and view; returns the replaced one.
-    pub fn upsert(&mut self, mut view: ViewRecord) -> Result<Option<ViewRecord>> {
-        view.validate()?;
-        view.noisy.sort_by_key(|r| r.spp);
-        match self.views.iter_mut().find(|v| v.scene == view.scene && v.view == view.view) {
-            Some(old) => Ok(Some(std::mem::replace(old, view))),
-            None => {
-                self.views.push(view);
-                Ok(None)
-            }
-        }
-    }
-
-    /// The record of `scene`/`view`.
-    pub fn get(&self, scene: &str, view: &str) -> Option<&ViewRecord> {
-        self.views.iter().find(|v| v.scene == scene && v.view == view)
-    }
-
-    /// The views of one split.
-    pub fn split(&self, split: Split) -> impl Iterator<Item = &ViewRecord> {
-        self.views.iter().filter(move |v| v.split == split)
     }
 }
 

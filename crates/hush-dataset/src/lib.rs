@@ -6,7 +6,8 @@
 //! * [`write_atomic`]: every file this crate writes appears complete or not at all.
 //! * [`check_finite`] / [`check_radiance`]: NaN/Inf and negative-radiance checks that name the pixel.
 //! * [`Layout`], [`Manifest`], [`load_view`]: the dataset directory (Open Image Denoise's file naming)
-//!   and its `manifest.json`.
+//!   and its `manifest.json` (merged from shard parts on read).
+//! * [`despeckle`]: the firefly filter of references; [`check_dataset`]: completeness and validity.
 //!
 //! ```
 //! # fn main() -> hush_dataset::Result<()> {
@@ -27,19 +28,26 @@
 //! ```
 
 mod atomic;
+mod check;
 mod error;
 mod exr_io;
+mod firefly;
 mod image;
 mod layout;
+mod manifest;
 mod png;
 mod validate;
 
 pub use atomic::write_atomic;
+pub use check::{CheckReport, check_dataset, check_image, link_or_copy, temp_files, temp_target};
 pub use error::{Error, Result};
 pub use exr_io::{ExrImage, channel_names, read_exr, read_rgb, write_exr, write_rgb};
+pub use firefly::{DEFAULT_FIREFLY_FACTOR, DespeckleStats, despeckle, luminance};
 pub use image::Image;
-pub use layout::{
-    AuxKind, AuxRecord, CameraRecord, Layout, Manifest, RenderRecord, Split, ViewImages, ViewRecord, load_view,
+pub use layout::{AuxKind, Layout, ViewImages, load_view};
+pub use manifest::{
+    AuxRecord, CameraRecord, DatasetConfig, FireflyRecord, Manifest, PendingView, ProbeRecord, ReferenceCheck,
+    ReferenceRecord, RenderRecord, SceneEntry, SkippedScene, Split, ViewGeneration, ViewRecord, manifest_files,
 };
 pub use png::{srgb_encode, write_png_preview};
 pub use validate::{NegativePolicy, check_finite, check_radiance};

@@ -2,6 +2,8 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
 
+pub use crate::dataset_cmd::DatasetArgs;
+
 #[derive(Parser, Debug)]
 #[command(
     name = "hush",
@@ -75,37 +77,6 @@ pub struct RenderArgs {
     /// Write timing statistics (paths, wall and CPU seconds, adapter) as JSON.
     #[arg(long)]
     pub stats: Option<PathBuf>,
-}
-
-#[derive(Args, Debug)]
-pub struct DatasetArgs {
-    /// Scene files (Mitsuba XML).
-    #[arg(required = true)]
-    pub scenes: Vec<PathBuf>,
-    /// Output folder (created; re-running resumes and skips finished images).
-    #[arg(long)]
-    pub out: PathBuf,
-    /// Views per scene: view 0 is the scene's own camera, the others are jittered around it.
-    #[arg(long, default_value_t = 4)]
-    pub views: u32,
-    /// How many of each scene's views (the last ones) form the test split.
-    #[arg(long, default_value_t = 1)]
-    pub test_views: u32,
-    /// Noisy images per view, at these samples per pixel.
-    #[arg(long, value_delimiter = ',', default_value = "1,2,4,8,16")]
-    pub spp: Vec<u32>,
-    /// Samples per pixel of the reference (rendered with an independent seed).
-    #[arg(long, default_value_t = 1024)]
-    pub ref_spp: u32,
-    /// Samples per pixel of the clean auxiliary features.
-    #[arg(long, default_value_t = 64)]
-    pub aux_spp: u32,
-    /// Square image size in pixels (overrides the scene file).
-    #[arg(long)]
-    pub size: Option<u32>,
-    /// Seed of the view jitter and of every render.
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
 }
 
 #[derive(Args, Debug)]

@@ -1,10 +1,12 @@
 use hush_dataset::{
-    AuxKind, AuxRecord, CameraRecord, Layout, Manifest, RenderRecord, Split, ViewRecord, load_view, write_rgb,
+    AuxKind, AuxRecord, CameraRecord, DatasetConfig, FireflyRecord, Layout, Manifest, PendingView, ReferenceRecord,
+    RenderRecord, SceneEntry, Split, ViewGeneration, ViewRecord, check_dataset, link_or_copy, load_view, temp_target,
+    write_rgb,
 };
 
 use crate::{TempDir, ramp};
 
-fn record(scene: &str, view: &str, spps: &[u32], size: u32) -> ViewRecord {
+pub fn record(scene: &str, view: &str, spps: &[u32], size: u32) -> ViewRecord {
     let render = |spp: u32, file: String| RenderRecord { spp, seed: 7 + u64::from(spp), file, render_seconds: 0.5 };
     ViewRecord {
         scene: scene.into(),
@@ -18,8 +20,17 @@ fn record(scene: &str, view: &str, spps: &[u32], size: u32) -> ViewRecord {
             width: size,
             height: size,
         },
+        generation: ViewGeneration { kind: "scene".into(), seed: 0, attempt: 0, probe: None },
         noisy: spps.iter().map(|&s| render(s, Layout::noisy_name(scene, view, s))).collect(),
-        reference: render(4096, Layout::reference_name(scene, view)),
+        reference: ReferenceRecord {
+            spp: 4096,
+            seed: 99,
+            file: Layout::reference_name(scene, view),
+            render_seconds: 2.0,
+            supersample: 2,
+            firefly: FireflyRecord { factor: 4.0, clamped_pixels: 0, energy_removed: 0.0 },
+            check: None,
+        },
         aux: AuxRecord {
             spp: 64,
             seed: 1,
@@ -32,13 +43,19 @@ fn record(scene: &str, view: &str, spps: &[u32], size: u32) -> ViewRecord {
     }
 }
 
-/// Writes every file of `view` as a small ramp image.
+/// Writes every file of `view` as a small ramp image, and the OIDN feature files beside each noisy render.
 fn write_files(root: &std::path::Path, view: &ViewRecord) {
     let n = view.camera.width as usize;
     let files = view.noisy.iter().map(|r| &r.file).chain([&view.reference.file]);
     let aux = AuxKind::ALL.map(|k| view.aux.file(k).to_string());
     for (i, file) in files.chain(aux.iter()).enumerate() {
         write_rgb(root.join(file), &ramp(n, n, 3, i as f32)).unwrap();
+    }
+    for r in &view.noisy {
+        for kind in AuxKind::OIDN {
+            let beside = root.join(Layout::noisy_aux_name(&view.scene, &view.view, r.spp, kind));
+            link_or_copy(&root.join(view.aux.file(kind)), &beside).unwrap();
+        }
     }
 }
 
@@ -78,7 +95,7 @@ fn manifest_round_trip_and_upsert() {
     assert_eq!(back, m);
     assert_eq!(back.split(Split::Test).map(|v| v.scene.as_str()).collect::<Vec<_>>(), ["sponza"]);
     let text = std::fs::read_to_string(dir.join("manifest.json")).unwrap();
-    assert!(text.contains("\"split\": \"test\"") && text.contains("\"format_version\": 1"), "{text}");
+    assert!(text.contains("\"split\": \"test\"") && text.contains("\"format_version\": 2"), "{text}");
 }
 
 #[test]
@@ -115,4 +132,145 @@ fn load_view_rejects_mismatched_sizes_and_nan() {
     std::fs::remove_file(dir.join(&view.aux.diffuse)).unwrap();
     let err = load_view(dir.path(), &view, 4).unwrap_err().to_string();
     assert!(err.contains("cbox_v0_ref.diff.exr"), "{err}");
+}
+
+fn config(scenes: &[&str], views: u32, spp: &[u32]) -> DatasetConfig {
+    DatasetConfig {
+        seed: 0,
+        views,
+        spp: spp.to_vec(),
+        aux_spp: 4,
+        ref_spp: 16,
+        ref_supersample: 2,
+        firefly_factor: 4.0,
+        ref_check_spp: 0,
+        size: Some(8),
+        scenes: scenes
+            .iter()
+            .map(|s| SceneEntry { name: s.to_string(), path: format!("{s}/scene.xml"), split: None, triangles: 2 })
+            .collect(),
+        skipped: Vec::new(),
+    }
+}
+
+#[test]
+fn oidn_feature_names_beside_noisy_renders() {
+    assert_eq!(Layout::noisy_aux_name("cbox", "v003", 4, AuxKind::Albedo), "cbox_v003_000004.alb.exr");
+    assert_eq!(Layout::noisy_aux_name("cbox", "v003", 256, AuxKind::Normal), "cbox_v003_000256.nrm.exr");
+    assert_eq!(Layout::new("/d").shard_manifest_path(2, 8), std::path::Path::new("/d/manifest.shard-2-of-8.json"));
+}
+
+#[test]
+fn progress_moves_from_pending_to_views() {
+    let mut m = Manifest::default();
+    let full = record("cbox", "v000", &[1, 2], 8);
+    let mut progress = PendingView::from(full.clone());
+    progress.reference = None;
+    progress.noisy.truncate(1);
+    m.upsert_progress(progress.clone()).unwrap();
+    assert!(m.views.is_empty() && m.pending.len() == 1);
+    assert_eq!(m.progress("cbox", "v000"), Some(progress));
+    m.upsert_progress(PendingView::from(full.clone())).unwrap();
+    assert!(m.pending.is_empty());
+    assert_eq!(m.get("cbox", "v000"), Some(&full));
+}
+
+#[test]
+fn shard_parts_merge_on_load() {
+    let dir = TempDir::new("shards");
+    let layout = Layout::new(dir.path());
+    let mut a = Manifest { config: Some(config(&["cbox"], 3, &[1, 2])), ..Default::default() };
+    a.upsert(record("cbox", "v000", &[1, 2], 8)).unwrap();
+    a.upsert(record("cbox", "v002", &[1, 2], 8)).unwrap();
+    let mut b = Manifest { config: Some(config(&["cbox"], 3, &[1, 2])), ..Default::default() };
+    let mut pending = PendingView::from(record("cbox", "v001", &[1], 8));
+    pending.aux = None;
+    b.upsert_progress(pending).unwrap();
+    a.save_file(&layout.shard_manifest_path(0, 2)).unwrap();
+    b.save_file(&layout.shard_manifest_path(1, 2)).unwrap();
+
+    let merged = Manifest::load(dir.path()).unwrap();
+    assert_eq!(merged.views.iter().map(|v| v.view.as_str()).collect::<Vec<_>>(), ["v000", "v002"]);
+    assert_eq!(merged.pending.len(), 1);
+    assert_eq!(merged.config, a.config);
+
+    // Finishing v001 in shard 1 completes the merged manifest; a stale manifest.json is overridden.
+    let mut stale = Manifest::default();
+    let mut old = record("cbox", "v001", &[1, 2], 8);
+    old.reference.spp = 7;
+    stale.upsert(old).unwrap();
+    stale.save(dir.path()).unwrap();
+    b.upsert_progress(PendingView::from(record("cbox", "v001", &[1, 2], 8))).unwrap();
+    b.save_file(&layout.shard_manifest_path(1, 2)).unwrap();
+    let merged = Manifest::load(dir.path()).unwrap();
+    assert_eq!(merged.views.len(), 3);
+    assert!(merged.pending.is_empty());
+    assert_eq!(merged.get("cbox", "v001").unwrap().reference.spp, 4096);
+}
+
+#[test]
+fn check_passes_a_complete_dataset_and_lists_every_problem() {
+    let dir = TempDir::new("check");
+    let mut m = Manifest { config: Some(config(&["cbox", "room"], 2, &[1, 2])), ..Default::default() };
+    for (scene, view) in [("cbox", "v000"), ("cbox", "v001"), ("room", "v000"), ("room", "v001")] {
+        let r = record(scene, view, &[1, 2], 8);
+        write_files(dir.path(), &r);
+        m.upsert(r).unwrap();
+    }
+    m.save(dir.path()).unwrap();
+    let report = check_dataset(dir.path()).unwrap();
+    assert!(report.ok(), "{:?}", report.problems);
+    assert_eq!((report.views, report.files_checked), (4, 4 * (2 * 3 + 5)));
+
+    // Break it in every way check looks for.
+    let mut nan = ramp(8, 8, 3, 0.0);
+    nan.pixel_mut(1, 1)[0] = f32::INFINITY;
+    write_rgb(dir.join("cbox_v000_000001.hdr.exr"), &nan).unwrap();
+    write_rgb(dir.join("cbox_v001_ref.hdr.exr"), &ramp(8, 4, 3, 0.0)).unwrap();
+    std::fs::remove_file(dir.join("room_v000_000002.nrm.exr")).unwrap();
+    std::fs::write(dir.join("room_v000_ref.spec.exr"), b"not an exr").unwrap();
+    write_rgb(dir.join("room_v000_000002.alb.exr"), &ramp(8, 8, 3, 9.0)).unwrap();
+    std::fs::write(dir.join(".room_v001_000001.hdr.exr.123.0.tmp"), b"partial").unwrap();
+    m.views.retain(|v| !(v.scene == "room" && v.view == "v001"));
+    let mut pending = PendingView::from(record("room", "v001", &[1], 8));
+    pending.reference = None;
+    m.upsert_progress(pending).unwrap();
+    let mut short = record("cbox", "v001", &[1], 8);
+    short.reference.file = "cbox_v001_ref.hdr.exr".into();
+    m.upsert(short).unwrap();
+    m.save(dir.path()).unwrap();
+
+    let report = check_dataset(dir.path()).unwrap();
+    let all = report.problems.join("\n");
+    for needle in [
+        "cbox_v000_000001.hdr.exr: 1 non-finite",
+        "cbox_v001_ref.hdr.exr: is 8x4x3 but the camera is 8x8x3",
+        "room_v000_000002.nrm.exr: missing",
+        "room_v001: unfinished",
+        "cbox_v001: noisy renders at {1} spp but the ladder is {1, 2}",
+        ".room_v001_000001.hdr.exr.123.0.tmp: temporary file",
+        "room_v000_ref.spec.exr",
+        "room_v000_000002.alb.exr: differs from",
+    ] {
+        assert!(all.contains(needle), "no problem mentions {needle:?}:\n{all}");
+    }
+    assert_eq!(report.problems.len(), 8, "{all}");
+}
+
+#[test]
+fn temporary_names_map_to_their_targets() {
+    assert_eq!(temp_target(".cbox_v000_000001.hdr.exr.4242.17.tmp"), Some("cbox_v000_000001.hdr.exr"));
+    assert_eq!(temp_target(".manifest.json.1.0.tmp"), Some("manifest.json"));
+    assert_eq!(temp_target("cbox.tmp"), None);
+    assert_eq!(temp_target(".x.y.tmp"), None);
+}
+
+#[test]
+fn link_or_copy_makes_equal_files_and_is_idempotent() {
+    let dir = TempDir::new("link");
+    write_rgb(dir.join("a.exr"), &ramp(4, 4, 3, 0.0)).unwrap();
+    link_or_copy(&dir.join("a.exr"), &dir.join("b.exr")).unwrap();
+    link_or_copy(&dir.join("a.exr"), &dir.join("b.exr")).unwrap();
+    assert_eq!(std::fs::read(dir.join("a.exr")).unwrap(), std::fs::read(dir.join("b.exr")).unwrap());
+    assert_eq!(dir.files(), ["a.exr", "b.exr"], "no temporary file is left");
 }

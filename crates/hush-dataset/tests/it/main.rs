@@ -4,6 +4,7 @@
 mod atomic;
 mod dataset;
 mod exr;
+mod firefly;
 mod image;
 mod png;
 mod validate;
