@@ -65,10 +65,8 @@ pub fn output(cmd: &mut Command) -> Result<String> {
         cmd.get_args().map(|a| a.to_string_lossy()).collect::<Vec<_>>().join(" ")
     );
     eprintln!("$ {shown}");
-    let out = cmd
-        .stderr(std::process::Stdio::inherit())
-        .output()
-        .map_err(|e| format!("cannot start `{shown}`: {e}"))?;
+    let out =
+        cmd.stderr(std::process::Stdio::inherit()).output().map_err(|e| format!("cannot start `{shown}`: {e}"))?;
     if !out.status.success() {
         return Err(format!("`{shown}` failed ({})", out.status));
     }

@@ -21,6 +21,7 @@ import math
 import os
 import resource
 import sys
+import tempfile
 import time
 
 import numpy as np
@@ -400,8 +401,8 @@ def cpu_seconds():
     return r.ru_utime + r.ru_stime
 
 
-def write_files(mi, name, spp):
-    folder = os.path.join(HERE, name)
+def write_files(mi, name, spp, root=HERE):
+    folder = os.path.join(root, name)
     os.makedirs(folder, exist_ok=True)
     files, xml = SCENES[name]["build"](spp)
     for fname, content in files.items():
@@ -432,7 +433,8 @@ def block_stats(passes):
 
 
 def render(mi, dr, name, spp, write):
-    folder = write_files(mi, name, spp)
+    # A noise estimate (write=False) renders from a scratch copy and leaves this folder as it is.
+    folder = write_files(mi, name, spp, HERE if write else tempfile.mkdtemp(prefix="mitsuba-ref-"))
     scene = mi.load_file(os.path.join(folder, "scene.xml"))
     per_pass = spp // PASSES
     assert per_pass * PASSES == spp, f"spp must be a multiple of {PASSES}"
