@@ -85,6 +85,7 @@ fn render(args: &[String]) -> Result<()> {
         _ if skip => serde_json::json!({ "skipped": "--no-mitsuba" }),
         Err(e) => {
             eprintln!("xtask: Mitsuba skipped: {e}");
+            hush_result["relmse"] = format!("skipped: computed in Mitsuba's venv ({})", mitsuba::SETUP).into();
             serde_json::json!({ "skipped": e, "install": mitsuba::SETUP })
         }
         Ok(mut py) => {
