@@ -10,12 +10,14 @@
 //! let scene = hush_scene::Scene::load("scene.xml".as_ref())?;
 //! let gpu = GpuContext::new()?;
 //! eprintln!("rendering on {}", gpu.describe());
-//! let out = Renderer::new(&gpu).render(&scene, &RenderSettings { spp: 16, seed: 7 }, &mut |_, _| {})?;
+//! let out = Renderer::new(&gpu)?.render(&scene, &RenderSettings { spp: 16, seed: 7 }, &mut |_, _| {})?;
 //! assert_eq!(out.color.channels, 3);
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
 mod gpu;
+#[cfg(test)]
+mod probe;
 mod render;
 mod upload;
 

@@ -41,12 +41,6 @@ struct TriNormals {
     n2: vec4<f32>,
 }
 
-// reflectance.w: BSDF kind (0 = diffuse). emission.w: 1 if the surface emits.
-struct Material {
-    reflectance: vec4<f32>,
-    emission: vec4<f32>,
-}
-
 // Emissive triangles with the cumulative distribution for picking one by power.
 struct Light {
     tri: u32,
@@ -226,13 +220,6 @@ fn basis(n: vec3<f32>) -> mat3x3<f32> {
     return mat3x3<f32>(t, bt, n);
 }
 
-fn sample_cosine(n: vec3<f32>) -> vec3<f32> {
-    let r = sqrt(rand());
-    let phi = 2.0 * PI * rand();
-    let local = vec3<f32>(r * cos(phi), r * sin(phi), sqrt(max(0.0, 1.0 - r * r)));
-    return normalize(basis(n) * local);
-}
-
 fn power_heuristic(a: f32, b: f32) -> f32 {
     let a2 = a * a;
     return a2 / (a2 + b * b);
@@ -261,6 +248,24 @@ struct Sample {
     normal: vec3<f32>,
 }
 
+// Albedo, diffuse (k_d) and specular (k_s) features of a material at its first non-delta hit.
+// Diffuse: k_d = reflectance, k_s = 0. Rough conductor: k_d = 0, k_s = specular reflectance ×
+// Fresnel at normal incidence. Plastic: k_d = diffuse reflectance, k_s = specular reflectance ×
+// the coat's Fresnel at normal incidence. Albedo = min(k_d + k_s, 1).
+fn features(m: Material) -> mat2x3<f32> {
+    let kind = mat_kind(m);
+    if kind == KIND_DIFFUSE {
+        return mat2x3<f32>(m.a.xyz, vec3<f32>(0.0));
+    }
+    if kind == KIND_CONDUCTOR {
+        return mat2x3<f32>(vec3<f32>(0.0), m.a.xyz * fresnel_conductor(1.0, m.c.xyz, m.d.xyz));
+    }
+    if kind == KIND_PLASTIC {
+        return mat2x3<f32>(m.a.xyz, m.b.xyz * fresnel_dielectric(1.0, m.b.w).r);
+    }
+    return mat2x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0));
+}
+
 fn trace(pixel: vec2<u32>) -> Sample {
     var out = Sample(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
     // Box filter: a uniform point inside the pixel. Row 0 is the top of the image.
@@ -270,7 +275,11 @@ fn trace(pixel: vec2<u32>) -> Sample {
     var d = normalize(params.forward.xyz + (2.0 * fx - 1.0) * params.right.xyz + (1.0 - 2.0 * fy) * params.up.xyz);
 
     var throughput = vec3<f32>(1.0);
-    var bsdf_pdf = 0.0;
+    // Solid-angle pdf of the BSDF sample that produced `d`, and whether it was a delta lobe
+    // (the camera ray counts as one: emitters it sees get full weight).
+    var prev_pdf = 0.0;
+    var prev_delta = true;
+    var features_done = false;
     var depth = 0u;
     loop {
         let hit = intersect(o, d, T_MAX);
@@ -292,31 +301,38 @@ fn trace(pixel: vec2<u32>) -> Sample {
             }
         }
         let mat = materials[bitcast<u32>(tri.p0.w)];
+        let delta = mat_is_delta(mat);
 
-        if depth == 0u {
-            out.albedo = mat.reflectance.xyz;
-            out.diffuse = mat.reflectance.xyz;
-            out.normal = ns;
+        if !features_done && !delta {
+            let f = features(mat);
+            out.diffuse = f[0];
+            out.specular = f[1];
+            out.albedo = min(f[0] + f[1], vec3<f32>(1.0));
+            out.normal = select(-ns, ns, front);
+            features_done = true;
         }
 
         // Emission reached by the camera or by BSDF sampling, weighted against light sampling.
         if mat.emission.w > 0.5 && front {
             var weight = 1.0;
-            if depth > 0u {
+            if !prev_delta {
                 let light_pdf = tri.e1.w * hit.t * hit.t / dot(ng, -d);
-                weight = power_heuristic(bsdf_pdf, light_pdf);
+                weight = power_heuristic(prev_pdf, light_pdf);
             }
             out.radiance += throughput * mat.emission.xyz * weight;
         }
 
-        // One-sided BSDF: nothing scatters from the back side.
-        if depth + 1u >= params.max_depth || !front {
+        let kind = mat_kind(mat);
+        let one_sided = (mat_flags(mat) & FLAG_TWO_SIDED) == 0u && kind != KIND_DIELECTRIC && kind != KIND_THIN_DIELECTRIC;
+        if depth + 1u >= params.max_depth || (one_sided && !front) {
             break;
         }
-        let refl = mat.reflectance.xyz;
+        let frame = basis(ns);
+        let to_local = transpose(frame);
+        let wo = to_local * -d;
 
         // Next-event estimation: a point on a light picked by power.
-        if params.light_count > 0u {
+        if params.light_count > 0u && !delta {
             let light = lights[pick_light(rand())];
             let lt = tris[light.tri];
             var a = rand();
@@ -329,30 +345,37 @@ fn trace(pixel: vec2<u32>) -> Sample {
             let lng = normalize(cross(lt.e1.xyz, lt.e2.xyz));
             let to_light = lp - p;
             let dist2 = dot(to_light, to_light);
-            let dist = sqrt(dist2);
-            let wi = to_light / dist;
+            let wi = to_light / sqrt(dist2);
             let cos_light = dot(lng, -wi);
-            let cos_surf = dot(ns, wi);
-            if cos_light > 0.0 && cos_surf > 0.0 && dot(ng, wi) > 0.0 {
-                let origin = offset_origin(p, ng, wi);
-                let to_light2 = lp - origin;
-                if !occluded(origin, normalize(to_light2), length(to_light2) * (1.0 - 1e-4)) {
-                    let light_pdf = lt.e1.w * dist2 / cos_light;
-                    let weight = power_heuristic(light_pdf, cos_surf * INV_PI);
-                    let lmat = materials[bitcast<u32>(lt.p0.w)];
-                    out.radiance += throughput * refl * INV_PI * cos_surf * lmat.emission.xyz * weight / light_pdf;
+            let wi_local = to_local * wi;
+            // The shading and geometric normals must agree on the side wi leaves from.
+            if cos_light > 0.0 && dot(ng, wi) * wi_local.z > 0.0 {
+                let f = bsdf_eval(mat, wo, wi_local);
+                if any(f > vec3<f32>(0.0)) {
+                    let origin = offset_origin(p, ng, wi);
+                    let to_light2 = lp - origin;
+                    if !occluded(origin, normalize(to_light2), length(to_light2) * (1.0 - 1e-4)) {
+                        let light_pdf = lt.e1.w * dist2 / cos_light;
+                        let weight = power_heuristic(light_pdf, bsdf_pdf(mat, wo, wi_local));
+                        let lmat = materials[bitcast<u32>(lt.p0.w)];
+                        out.radiance += throughput * f * lmat.emission.xyz * weight / light_pdf;
+                    }
                 }
             }
         }
 
-        // BSDF sampling: cosine-weighted, so the weight f·cos/pdf is the reflectance.
-        let wi = sample_cosine(ns);
-        let cos_i = dot(ns, wi);
-        if cos_i <= 0.0 || dot(ng, wi) <= 0.0 {
+        // BSDF sampling.
+        let s = bsdf_sample(mat, wo, vec2<f32>(rand(), rand()), rand());
+        if !s.valid {
             break;
         }
-        bsdf_pdf = cos_i * INV_PI;
-        throughput *= refl;
+        let wi = frame * s.wi;
+        if dot(ng, wi) * s.wi.z <= 0.0 {
+            break;
+        }
+        throughput *= s.weight;
+        prev_pdf = s.pdf;
+        prev_delta = s.delta;
         depth += 1u;
 
         if depth >= RR_DEPTH {
@@ -366,7 +389,7 @@ fn trace(pixel: vec2<u32>) -> Sample {
             break;
         }
         o = offset_origin(p, ng, wi);
-        d = wi;
+        d = normalize(wi);
     }
     return out;
 }

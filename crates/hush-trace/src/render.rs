@@ -9,7 +9,7 @@ use crate::upload::{GpuLight, GpuMaterial, GpuNode, GpuNormals, GpuTri, flatten}
 use crate::{GpuContext, TraceError};
 
 /// The WGSL source of the path-tracing kernel (validated by a test with naga).
-pub const KERNEL_SOURCE: &str = include_str!("path.wgsl");
+pub const KERNEL_SOURCE: &str = concat!(include_str!("bsdf.wgsl"), include_str!("path.wgsl"));
 
 /// Floats per pixel in the accumulation buffer; mirrors `ACCUM_STRIDE` in the kernel.
 const ACCUM_STRIDE: usize = 19;
@@ -75,7 +75,9 @@ pub struct Renderer<'a> {
 }
 
 impl<'a> Renderer<'a> {
-    pub fn new(gpu: &'a GpuContext) -> Renderer<'a> {
+    /// Compiles the kernel. A shader the driver rejects is an error, not a panic.
+    pub fn new(gpu: &'a GpuContext) -> Result<Renderer<'a>, TraceError> {
+        let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = gpu.device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("path.wgsl"),
             source: wgpu::ShaderSource::Wgsl(KERNEL_SOURCE.into()),
@@ -88,7 +90,10 @@ impl<'a> Renderer<'a> {
             compilation_options: Default::default(),
             cache: None,
         });
-        Renderer { gpu, pipeline }
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(TraceError::Gpu(format!("the path-tracing kernel does not compile on {}: {e}", gpu.info.name)));
+        }
+        Ok(Renderer { gpu, pipeline })
     }
 
     /// Renders `scene` with `settings.spp` paths per pixel. `progress(done, total)` is called

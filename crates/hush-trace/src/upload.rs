@@ -20,11 +20,101 @@ pub(crate) struct GpuNormals {
     pub n: [[f32; 4]; 3],
 }
 
+/// Mirrors `Material` in bsdf.wgsl, which documents each field.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
 pub(crate) struct GpuMaterial {
-    pub reflectance: [f32; 4],
+    pub a: [f32; 4],
+    pub b: [f32; 4],
+    pub c: [f32; 4],
+    pub d: [f32; 4],
     pub emission: [f32; 4],
+}
+
+// BSDF kinds and flags; mirror the constants in bsdf.wgsl.
+const KIND_DIFFUSE: u32 = 0;
+const KIND_CONDUCTOR: u32 = 1;
+const KIND_DIELECTRIC: u32 = 2;
+const KIND_THIN_DIELECTRIC: u32 = 3;
+const KIND_PLASTIC: u32 = 4;
+const FLAG_TWO_SIDED: u32 = 1;
+const FLAG_NONLINEAR: u32 = 2;
+
+/// The kernel's record of a material, or why the kernel cannot render it yet.
+pub(crate) fn gpu_material(m: &Material, emission: Vec3, shape: &str) -> Result<GpuMaterial, TraceError> {
+    let unsupported = |what: &str| {
+        Err(TraceError::Invalid(format!("material '{what}' of shape '{shape}' is not supported by the kernel yet")))
+    };
+    let rgb = |r: &Reflectance| match r {
+        Reflectance::Rgb(v) => Ok(*v),
+        Reflectance::Texture(_) => Err(()),
+    };
+    let bits = |kind: u32, flags: u32| f32::from_bits(kind | flags << 8);
+    let two = |t: bool| if t { FLAG_TWO_SIDED } else { 0 };
+    let zero = [0.0; 4];
+    let emits = emission.max_element() > 0.0;
+    let emission = v4(emission, emits as u32 as f32);
+    Ok(match *m {
+        Material::Diffuse { ref reflectance, two_sided } => {
+            let Ok(r) = rgb(reflectance) else { return unsupported("textured diffuse") };
+            GpuMaterial {
+                a: v4(r, 0.0),
+                b: zero,
+                c: v4(Vec3::ZERO, bits(KIND_DIFFUSE, two(two_sided))),
+                d: zero,
+                emission,
+            }
+        }
+        Material::Conductor { alpha, ior, specular_reflectance, two_sided } => {
+            // Without an index of refraction, a perfect mirror (eta 0, k 1 gives F = 1).
+            let ior = ior.unwrap_or(hush_scene::ComplexIor { eta: Vec3::ZERO, k: Vec3::ONE });
+            GpuMaterial {
+                a: v4(specular_reflectance, alpha),
+                b: zero,
+                c: v4(ior.eta, bits(KIND_CONDUCTOR, two(two_sided))),
+                d: v4(ior.k, 0.0),
+                emission,
+            }
+        }
+        Material::Dielectric { alpha, int_ior, ext_ior, thin, specular_reflectance, specular_transmittance } => {
+            if alpha > 0.0 && !thin {
+                return unsupported("roughdielectric");
+            }
+            let kind = if thin { KIND_THIN_DIELECTRIC } else { KIND_DIELECTRIC };
+            GpuMaterial {
+                a: v4(specular_reflectance, 0.0),
+                b: v4(specular_transmittance, int_ior / ext_ior),
+                c: v4(Vec3::ZERO, bits(kind, FLAG_TWO_SIDED)),
+                d: zero,
+                emission,
+            }
+        }
+        Material::Plastic {
+            ref diffuse_reflectance,
+            specular_reflectance,
+            alpha,
+            int_ior,
+            ext_ior,
+            nonlinear,
+            two_sided,
+        } => {
+            if alpha > 0.0 {
+                return unsupported("roughplastic");
+            }
+            let Ok(diffuse) = rgb(diffuse_reflectance) else { return unsupported("textured plastic") };
+            // Mitsuba's plastic picks the coat with weight mean(ks) / (mean(kd) + mean(ks)).
+            let (dm, sm) = (diffuse.element_sum() / 3.0, specular_reflectance.element_sum() / 3.0);
+            let weight = if dm + sm > 0.0 { sm / (dm + sm) } else { 0.5 };
+            let flags = two(two_sided) | if nonlinear { FLAG_NONLINEAR } else { 0 };
+            GpuMaterial {
+                a: v4(diffuse, 0.0),
+                b: v4(specular_reflectance, int_ior / ext_ior),
+                c: v4(Vec3::ZERO, bits(KIND_PLASTIC, flags)),
+                d: v4(Vec3::ZERO, weight),
+                emission,
+            }
+        }
+    })
 }
 
 #[repr(C)]
@@ -82,23 +172,9 @@ pub(crate) fn flatten(scene: &Scene) -> Result<GpuScene, TraceError> {
         return Err(TraceError::Invalid(format!("emitter '{what}' is not supported by the kernel yet")));
     }
     for (mi, mesh) in scene.meshes.iter().enumerate() {
-        let reflectance = match mesh.material {
-            Material::Diffuse { reflectance: Reflectance::Rgb(r), two_sided: false } => r,
-            m => {
-                let what = match m {
-                    Material::Diffuse { two_sided: true, .. } => "twosided diffuse".to_string(),
-                    Material::Diffuse { .. } => "textured diffuse".to_string(),
-                    m => m.kind().to_string(),
-                };
-                return Err(TraceError::Invalid(format!(
-                    "material '{what}' of shape '{}' is not supported by the kernel yet",
-                    mesh.name
-                )));
-            }
-        };
         let emission = mesh.emission.unwrap_or(Vec3::ZERO);
         let emits = emission.max_element() > 0.0;
-        materials.push(GpuMaterial { reflectance: v4(reflectance, 0.0), emission: v4(emission, emits as u32 as f32) });
+        materials.push(gpu_material(&mesh.material, emission, &mesh.name)?);
         for (ti, idx) in mesh.indices.iter().enumerate() {
             let [a, b, c] = idx.map(|k| mesh.positions[k as usize]);
             if emits {

@@ -649,7 +649,7 @@ pub fn run(args: DatasetArgs) -> Result<()> {
             .expect("valid template")
             .progress_chars("=> "),
     );
-    let mut ctx = Ctx { args: &args, layout, renderer: Renderer::new(&gpu), bars, total, own, own_path, rendered: 0 };
+    let mut ctx = Ctx { args: &args, layout, renderer: Renderer::new(&gpu)?, bars, total, own, own_path, rendered: 0 };
     let start = std::time::Instant::now();
     let n_views = args.views;
     for (k, &(s, v)) in jobs.iter().enumerate() {

@@ -25,7 +25,7 @@ fn gpu() -> &'static GpuContext {
 }
 
 fn render(scene: &Scene, spp: u32, seed: u64) -> RenderOutput {
-    Renderer::new(gpu()).render(scene, &RenderSettings { spp, seed }, &mut |_, _| {}).unwrap()
+    Renderer::new(gpu()).unwrap().render(scene, &RenderSettings { spp, seed }, &mut |_, _| {}).unwrap()
 }
 
 fn cbox(size: u32) -> Scene {
@@ -186,7 +186,8 @@ fn same_seed_same_image_other_seed_other_image() {
 #[test]
 fn zero_spp_is_an_error() {
     let gpu = gpu();
-    let err = Renderer::new(gpu).render(&cbox(8), &RenderSettings { spp: 0, seed: 0 }, &mut |_, _| {}).unwrap_err();
+    let err =
+        Renderer::new(gpu).unwrap().render(&cbox(8), &RenderSettings { spp: 0, seed: 0 }, &mut |_, _| {}).unwrap_err();
     assert!(err.to_string().contains("spp"), "{err}");
 }
 
