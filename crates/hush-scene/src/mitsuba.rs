@@ -692,6 +692,15 @@ impl Parser<'_, '_> {
     }
 
     fn finish_alpha(&mut self, node: Node, alpha: f32, au: Option<f32>, av: Option<f32>) -> Result<f32, SceneError> {
+        // Mitsuba's rough BSDFs default to Beckmann; hush has GGX only, so say so.
+        let rough = self.attr(node, "type").is_ok_and(|t| t.starts_with("rough"));
+        if rough && !node.children().any(|c| c.is_element() && c.attribute("name") == Some("distribution")) {
+            self.warn(
+                node,
+                "no microfacet distribution given: Mitsuba's default is 'beckmann', which is not supported yet: \
+                 GGX with the same alpha is used (add <string name=\"distribution\" value=\"ggx\"/> to silence this)",
+            );
+        }
         let a = match (au, av) {
             (None, None) => alpha,
             (u, v) => {

@@ -238,6 +238,7 @@ def _(spp):
     </bsdf>
 """
     rough = """    <bsdf type="roughconductor">
+      <string name="distribution" value="ggx"/>
       <string name="material" value="Al"/>
       <float name="alpha" value="0.3"/>
     </bsdf>
@@ -329,6 +330,7 @@ def _(spp):
     }
     ground = rect('      <scale value="3"/>\n      <rotate x="1" angle="-90"/>\n      <translate y="-0.5"/>', diffuse("0.5, 0.5, 0.5"))
     metal = """    <bsdf type="roughconductor">
+      <string name="distribution" value="ggx"/>
       <string name="material" value="Cu"/>
       <float name="alpha" value="0.2"/>
     </bsdf>
@@ -375,6 +377,7 @@ def _(spp):
 def _(spp):
     files = {"metal.obj": sphere_obj((0.4, -0.65, -0.1), 0.35), "diffuse.obj": sphere_obj((-0.45, -0.65, 0.1), 0.35)}
     metal = """    <bsdf type="roughconductor">
+      <string name="distribution" value="ggx"/>
       <string name="material" value="Ag"/>
       <float name="alpha" value="0.1"/>
     </bsdf>

@@ -152,3 +152,16 @@ fn degenerate_triangles_are_dropped() {
         scene.warnings
     );
 }
+
+#[test]
+fn rough_bsdf_without_distribution_warns_about_beckmann() {
+    let with = |extra: &str| {
+        let xml = format!(
+            "<scene version=\"3.0.0\">{SENSOR}\n<bsdf type=\"roughconductor\" id=\"m\">{extra}<float name=\"alpha\" value=\"0.2\"/></bsdf></scene>"
+        );
+        Scene::from_mitsuba_str(&xml, Path::new("x.xml")).unwrap().warnings
+    };
+    let warnings = with("");
+    assert!(warnings.iter().any(|w| w.contains("beckmann") && w.contains("x.xml:")), "{warnings:?}");
+    assert!(with("<string name=\"distribution\" value=\"ggx\"/>").is_empty());
+}

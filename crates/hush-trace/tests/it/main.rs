@@ -231,3 +231,96 @@ fn white_furnace_matches_the_closed_form() {
         }
     }
 }
+
+/// The Mitsuba 3 references of `data/tests/mitsuba` (one scene per BSDF family, rendered by
+/// `render_references.py`), compared block by block: each 8×8 block mean of each channel
+/// within 4 combined standard errors (hush's from its per-pixel variance, Mitsuba's from the
+/// spread of its 16 passes, `reference.json`) plus 0.5 % of the reference.
+fn compare_with_mitsuba(name: &str, spp: u32) {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/tests/mitsuba").join(name);
+    let scene = Scene::load(&dir.join("scene.xml")).unwrap();
+    let out = render(&scene, spp, 17);
+    let reference = read_rgb(dir.join("mitsuba.exr")).unwrap();
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("reference.json")).unwrap()).unwrap();
+    let block = meta["block"].as_u64().unwrap() as usize;
+    let rel_se = &meta["block_rel_se"];
+    assert_eq!((out.color.width, out.color.height), (reference.width, reference.height));
+    let mut failures = Vec::new();
+    for by in 0..reference.height / block {
+        for bx in 0..reference.width / block {
+            for c in 0..3 {
+                let (mut ours, mut theirs, mut var) = (0.0f64, 0.0f64, 0.0f64);
+                for y in by * block..(by + 1) * block {
+                    for x in bx * block..(bx + 1) * block {
+                        ours += out.color.pixel(x, y)[c] as f64;
+                        theirs += reference.pixel(x, y)[c] as f64;
+                        var += out.color_variance.pixel(x, y)[c] as f64;
+                    }
+                }
+                let n = (block * block) as f64;
+                let (ours, theirs) = (ours / n, theirs / n);
+                let se_ref = rel_se[by][bx][c].as_f64().unwrap() * theirs.abs();
+                let se = (var / (n * n) + se_ref * se_ref).sqrt();
+                let tol = 4.0 * se + 0.005 * theirs.abs();
+                if (ours - theirs).abs() > tol {
+                    failures.push(format!("block ({bx},{by}) ch {c}: hush {ours:.5} Mitsuba {theirs:.5} tol {tol:.5}"));
+                }
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{name}: {} blocks off:\n{}", failures.len(), failures.join("\n"));
+}
+
+#[test]
+fn matches_mitsuba_diffuse_and_twosided() {
+    compare_with_mitsuba("diffuse-twosided", 256);
+}
+
+#[test]
+fn matches_mitsuba_smooth_conductor() {
+    compare_with_mitsuba("conductor", 256);
+}
+
+#[test]
+fn matches_mitsuba_rough_conductor() {
+    compare_with_mitsuba("roughconductor", 256);
+}
+
+#[test]
+fn matches_mitsuba_smooth_dielectric() {
+    compare_with_mitsuba("dielectric", 512);
+}
+
+#[test]
+fn matches_mitsuba_thin_dielectric() {
+    compare_with_mitsuba("thindielectric", 256);
+}
+
+#[test]
+fn matches_mitsuba_plastic() {
+    compare_with_mitsuba("plastic", 256);
+}
+
+#[test]
+fn matches_mitsuba_under_stiff_lighting() {
+    compare_with_mitsuba("stiff", 512);
+}
+
+/// Scenes whose features the kernel lacks are refused by name, never rendered wrongly.
+#[test]
+fn unsupported_features_are_named_errors() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/tests/mitsuba");
+    for (name, what) in [
+        ("roughdielectric", "roughdielectric"),
+        ("roughplastic", "roughplastic"),
+        ("textured", "textured"),
+        ("envmap", "envmap"),
+        ("constant", "constant"),
+    ] {
+        let scene = Scene::load(&dir.join(name).join("scene.xml")).unwrap();
+        let err = Renderer::new(gpu()).unwrap().render(&scene, &RenderSettings { spp: 1, seed: 0 }, &mut |_, _| {});
+        let msg = err.expect_err(name).to_string();
+        assert!(msg.contains(what) && msg.contains("not supported"), "{name}: {msg}");
+    }
+}
