@@ -15,6 +15,11 @@ pub fn run(args: &[String]) -> Result<()> {
     let dataset = dir.join("dataset");
     let run_dir = dir.join("run");
     let scene = project_root().join("data/scenes/cbox/scene.xml");
+    // Each demo starts from scratch, so that output of an older build never mixes in;
+    // `--resume` keeps what an interrupted demo already rendered and trained.
+    if !args.iter().any(|a| a == "--resume") && dir.exists() {
+        std::fs::remove_dir_all(&dir).map_err(|e| format!("cannot clear {}: {e}", dir.display()))?;
+    }
 
     spawn(
         Command::new(&hush)

@@ -12,7 +12,7 @@ use std::process::ExitCode;
 const USAGE: &str = "usage: cargo xtask <task>
 tasks:
   test [cargo test args]     install a Vulkan driver if none is present, then run every test
-  demo [--release]           render → dataset → train → eval → report on the bundled Cornell box
+  demo [--release] [--resume] render → dataset → train → eval → report on the bundled Cornell box
   bench render [--release] [--spp N]
                              M paths per CPU-second and relMSE × CPU-seconds on the Cornell box
                              (512², max_depth 8), hush against Mitsuba 3 when it is installed
