@@ -27,7 +27,7 @@ pub fn run(args: &[String]) -> Result<()> {
             .arg(&scene)
             .arg("--out")
             .arg(&dataset)
-            .args(["--views", "6", "--test-views", "1", "--spp", "4,16", "--ref-spp", "1024"])
+            .args(["--views", "6", "--test-views", "1", "--spp", "4,16", "--ref-spp", "256"])
             .args(["--aux-spp", "32", "--size", "128", "--seed", "1"]),
     )?;
     spawn(
