@@ -118,7 +118,12 @@ impl Builder<'_> {
         let (bounds, cbounds) = self.bounds(start, end);
         let count = end - start;
         let leaf = |nodes: &mut Vec<BvhNode>| {
-            nodes[index] = BvhNode { min: bounds.min.to_array(), first: start as u32, max: bounds.max.to_array(), count: count as u32 };
+            nodes[index] = BvhNode {
+                min: bounds.min.to_array(),
+                first: start as u32,
+                max: bounds.max.to_array(),
+                count: count as u32,
+            };
         };
         // Only an empty input reaches a node with no triangles: it stays a zero node, and
         // traversal never starts on a scene without triangles.
@@ -157,7 +162,8 @@ impl Builder<'_> {
         let empty = BvhNode { min: [0.0; 3], first: 0, max: [0.0; 3], count: 0 };
         self.nodes.push(empty);
         self.nodes.push(empty);
-        self.nodes[index] = BvhNode { min: bounds.min.to_array(), first: left as u32, max: bounds.max.to_array(), count: 0 };
+        self.nodes[index] =
+            BvhNode { min: bounds.min.to_array(), first: left as u32, max: bounds.max.to_array(), count: 0 };
         self.build(left, start, mid);
         self.build(left + 1, mid, end);
     }
@@ -197,7 +203,8 @@ impl Builder<'_> {
                 if nl == 0 || nr == 0 {
                     continue;
                 }
-                let cost = TRAVERSAL_COST + (left_area[k - 1] * nl as f32 + acc.area() * nr as f32) / bounds.area().max(1e-30);
+                let cost =
+                    TRAVERSAL_COST + (left_area[k - 1] * nl as f32 + acc.area() * nr as f32) / bounds.area().max(1e-30);
                 if best.is_none_or(|(c, _, _)| cost < c) {
                     best = Some((cost, axis, lo + k as f32 / scale));
                 }

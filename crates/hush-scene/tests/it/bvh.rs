@@ -1,7 +1,7 @@
 //! The BVH finds the same nearest hit as testing every triangle.
 
 use glam::Vec3;
-use hush_scene::{Bvh, Scene, MAX_LEAF_TRIANGLES};
+use hush_scene::{Bvh, MAX_LEAF_TRIANGLES, Scene};
 
 /// Möller–Trumbore; the nearest t in (0, t_max).
 fn hit(o: Vec3, d: Vec3, t: &[Vec3; 3]) -> Option<f32> {
@@ -129,10 +129,7 @@ fn bvh_handles_coincident_and_tiny_inputs() {
 fn bvh_matches_brute_force_on_the_cornell_box() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenes/cbox/scene.xml");
     let scene = Scene::load(&path).unwrap();
-    let tris: Vec<[Vec3; 3]> = scene
-        .meshes
-        .iter()
-        .flat_map(|m| m.indices.iter().map(|t| t.map(|i| m.positions[i as usize])))
-        .collect();
+    let tris: Vec<[Vec3; 3]> =
+        scene.meshes.iter().flat_map(|m| m.indices.iter().map(|t| t.map(|i| m.positions[i as usize]))).collect();
     check(&tris, 2000, 4);
 }
