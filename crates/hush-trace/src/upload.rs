@@ -176,6 +176,17 @@ pub(crate) fn flatten(scene: &Scene) -> Result<GpuScene, TraceError> {
         let emits = emission.max_element() > 0.0;
         materials.push(gpu_material(&mesh.material, emission, &mesh.name)?);
         for (ti, idx) in mesh.indices.iter().enumerate() {
+            // Mitsuba takes a surface's front side (for one-sided BSDFs and emitters) from its
+            // shading normal when the mesh has vertex normals: wind such triangles so that the
+            // geometric normal agrees with their vertex normals.
+            let mut idx = *idx;
+            if let Some(n) = &mesh.normals {
+                let [a, b, c] = idx.map(|k| mesh.positions[k as usize]);
+                let shading = idx.iter().map(|&k| n[k as usize]).sum::<Vec3>();
+                if (b - a).cross(c - a).dot(shading) < 0.0 {
+                    idx.swap(1, 2);
+                }
+            }
             let [a, b, c] = idx.map(|k| mesh.positions[k as usize]);
             if emits {
                 light_weights.push((tris.len() as u32, mesh.triangle_area(ti) * emission.element_sum()));

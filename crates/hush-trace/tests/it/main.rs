@@ -324,3 +324,31 @@ fn unsupported_features_are_named_errors() {
         assert!(msg.contains(what) && msg.contains("not supported"), "{name}: {msg}");
     }
 }
+
+/// As in Mitsuba, a mesh with vertex normals emits (and reflects, if one-sided) on the side its
+/// normals point to, whatever its winding: the light here is wound to face up but its normals
+/// point down at the floor, so the floor is lit.
+#[test]
+fn vertex_normals_choose_the_front_side() {
+    let dir = std::env::temp_dir().join(format!("hush-normals-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("floor.obj"), "v -2 0 -2\nv 2 0 -2\nv 2 0 2\nv -2 0 2\nf 1 4 3\nf 1 3 2\n").unwrap();
+    // Counter-clockwise seen from above (normal +y), vertex normals -y.
+    std::fs::write(
+        dir.join("light.obj"),
+        "v -0.5 1 -0.5\nv 0.5 1 -0.5\nv 0.5 1 0.5\nv -0.5 1 0.5\nvn 0 -1 0\nf 1//1 4//1 3//1\nf 1//1 3//1 2//1\n",
+    )
+    .unwrap();
+    let xml = r#"<scene version="3.0.0">
+  <sensor type="perspective"><float name="fov" value="60"/>
+    <transform name="to_world"><lookat origin="0,0.5,3" target="0,0,0" up="0,1,0"/></transform>
+    <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/></film></sensor>
+  <shape type="obj"><string name="filename" value="floor.obj"/><bsdf type="diffuse"/></shape>
+  <shape type="obj"><string name="filename" value="light.obj"/>
+    <emitter type="area"><rgb name="radiance" value="1, 1, 1"/></emitter></shape>
+</scene>"#;
+    std::fs::write(dir.join("scene.xml"), xml).unwrap();
+    let scene = Scene::load(&dir.join("scene.xml")).unwrap();
+    let out = render(&scene, 4, 1);
+    assert!(out.color.mean()[0] > 0.01, "the floor should be lit: mean {:?}", out.color.mean());
+}
