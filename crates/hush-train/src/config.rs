@@ -4,10 +4,10 @@ use hush_net::transfer::Transfer;
 use hush_net::{ALIGNMENT, Features, Loss, ModelInfo, UNetConfig};
 use serde::{Deserialize, Serialize};
 
-use crate::{Result, TrainError};
+use crate::{Augment, OptimizerConfig, Result, Schedule, TrainError};
 
-/// A training run: network, data layout, loss and optimizer settings. Serializable so a run directory
-/// can keep it (as OIDN's `config.json`).
+/// A training run: network, data layout, loss, optimizer and schedule. Serializable so a run directory
+/// can keep it (as OIDN's `config.json`) and a checkpoint can tell whether it belongs to it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TrainConfig {
     /// Auxiliary input features; the samples' input channels must be `features.in_channels()`.
@@ -16,25 +16,31 @@ pub struct TrainConfig {
     pub transfer: Transfer,
     pub net: UNetConfig,
     pub loss: Loss,
-    /// Adam's learning rate, constant (the thesis: 1e-4).
+    pub optimizer: OptimizerConfig,
+    /// The base learning rate the schedule scales (the thesis: 1e-4, constant; for one-cycle the maximum).
     pub lr: f64,
+    pub schedule: Schedule,
     /// Optimizer steps (batches) in total.
     pub steps: usize,
+    /// Steps per epoch; 0 means one pass over the training samples, `⌈samples / batch⌉`.
+    pub epoch_steps: usize,
     /// Crops per batch.
     pub batch: usize,
     /// Side of the square random crops; a multiple of 16 (the thesis and OIDN: 256).
     pub crop: usize,
+    pub augment: Augment,
     /// Seeds the initial weights and the crop sequence: same seed, same data, same run.
     pub seed: u64,
-    /// Hand out weights every this many steps (0: never).
-    pub checkpoint_every: usize,
-    /// Random flips and transposition of the crops (8 orientations, as OIDN).
-    pub augment: bool,
+    /// Every this many epochs (and after the last step): the test loss, and a checkpoint to keep. 0: at the
+    /// end only.
+    pub eval_every: usize,
+    /// Scale the gradients down so that their global L2 norm is at most this.
+    pub clip_grad_norm: Option<f64>,
 }
 
 impl TrainConfig {
     /// The thesis' recipe for `features` at full OIDN width: MIX loss, Adam at a constant 1e-4, 256² crops,
-    /// PU transfer. `steps`, `batch` and `checkpoint_every` are placeholders to adjust to the machine.
+    /// PU transfer, flips. `steps`, `batch` and `eval_every` are placeholders to adjust to the machine.
     pub fn thesis(features: Features) -> Self {
         let net = UNetConfig::oidn(features.in_channels());
         TrainConfig {
@@ -42,19 +48,28 @@ impl TrainConfig {
             transfer: Transfer::Pu,
             net,
             loss: Loss::Mix,
+            optimizer: OptimizerConfig::adam(),
             lr: 1e-4,
+            schedule: Schedule::Constant,
             steps: 1000,
+            epoch_steps: 0,
             batch: 4,
             crop: 256,
+            augment: Augment::Flips,
             seed: 0,
-            checkpoint_every: 100,
-            augment: true,
+            eval_every: 10,
+            clip_grad_norm: None,
         }
     }
 
     /// What the weights file records about this run.
     pub fn model_info(&self) -> ModelInfo {
         ModelInfo { net: self.net.clone(), features: self.features.clone(), transfer: self.transfer }
+    }
+
+    /// Steps per epoch with `samples` training samples.
+    pub fn steps_per_epoch(&self, samples: usize) -> usize {
+        if self.epoch_steps > 0 { self.epoch_steps } else { samples.div_ceil(self.batch.max(1)).max(1) }
     }
 
     /// Checks the fields against each other.
@@ -73,6 +88,26 @@ impl TrainConfig {
         if self.crop == 0 || !self.crop.is_multiple_of(ALIGNMENT) {
             return bad(format!("crop must be a non-zero multiple of {ALIGNMENT}, got {}", self.crop));
         }
+        if let Some(c) = self.clip_grad_norm
+            && !(c.is_finite() && c > 0.0)
+        {
+            return bad(format!("gradient clipping norm must be finite and > 0, got {c}"));
+        }
+        self.optimizer.validate().map_err(TrainError::Config)?;
+        self.schedule.validate().map_err(TrainError::Config)?;
         Ok(())
+    }
+
+    /// The fields whose values differ between `self` and `other`, as `(name, self's value, other's value)`
+    /// in JSON.
+    pub fn differences(&self, other: &TrainConfig) -> Vec<(String, String, String)> {
+        let (a, b) = (serde_json::to_value(self), serde_json::to_value(other));
+        let (Ok(serde_json::Value::Object(a)), Ok(serde_json::Value::Object(b))) = (a, b) else {
+            return vec![];
+        };
+        a.iter()
+            .filter(|(k, v)| b.get(*k) != Some(v))
+            .map(|(k, v)| (k.clone(), v.to_string(), b.get(k).map(|v| v.to_string()).unwrap_or_default()))
+            .collect()
     }
 }

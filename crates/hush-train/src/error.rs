@@ -6,7 +6,8 @@ pub type Result<T, E = TrainError> = std::result::Result<T, E>;
 
 #[derive(Debug, thiserror::Error)]
 pub enum TrainError {
-    /// The configuration cannot work (crop not a multiple of 16, channel counts that disagree, ...).
+    /// The configuration cannot work (crop not a multiple of 16, channel counts that disagree, a
+    /// checkpoint of another run, ...).
     #[error("invalid training configuration: {0}")]
     Config(String),
     /// The samples cannot be trained on (non-finite values, wrong sizes, ...).
@@ -15,11 +16,11 @@ pub enum TrainError {
     /// The loss or a gradient became NaN or infinite. Training stopped before the bad update, so
     /// `last_good` holds the weights and loss log of every step before `step`.
     #[error(
-        "training stopped at step {step}: {cause}. The weights from before this step are kept \
-         ({} logged steps).",
+        "training stopped at step {step} (batch: {batch}): {cause}. The weights from before this step are \
+         kept ({} logged steps).",
         last_good.log.len()
     )]
-    Diverged { step: usize, cause: String, last_good: Box<Trained> },
+    Diverged { step: usize, batch: String, cause: String, last_good: Box<Trained> },
     #[error(transparent)]
     Candle(#[from] candle_core::Error),
 }

@@ -1,10 +1,17 @@
-//! The hush training loop, as a library: random crops of prepared samples, Adam at a constant learning
-//! rate, a loss log, and self-describing checkpoints handed to the caller (this crate writes no files).
+//! The hush training loop, as a library: random crops of prepared samples, the thesis's optimizers and
+//! learning-rate schedules, per-epoch test loss, and resumable checkpoints handed to the caller as bytes
+//! (this crate writes no files).
 //!
-//! * [`TrainConfig`]: network, features, loss, learning rate, steps, batch, crop, seed, checkpoints.
+//! * [`TrainConfig`]: network, features, loss, optimizer, learning rate and schedule, steps, batch, crop,
+//!   augmentation, seed.
+//! * [`Optimizer`]: Adam/AdamW and SGD with momentum whose state can be saved and restored exactly.
+//! * [`Schedule`]: the learning rate per epoch (thesis §4.4: constant, lambda, exponential, cosine, SGDR,
+//!   and OIDN's one-cycle).
 //! * [`TrainSample`]: an input/target pair already in the network's space;
 //!   [`TrainSample::from_linear`] prepares one from linear images as OIDN's toolkit does.
-//! * [`train`]: runs the loop, reports every step to an observer, returns [`Trained`].
+//! * [`train`]: runs the loop, reports every step to an observer, returns [`Trained`];
+//!   [`read_train_state`] reads where a checkpoint stands.
+//! * [`plot_losses`]: a PNG of the training and test loss curves.
 //!
 //! ```
 //! use std::ops::ControlFlow;
@@ -19,8 +26,8 @@
 //!
 //! let mut cfg = TrainConfig::thesis(Features::default());
 //! cfg.net = UNetConfig { kind: UNetKind::Unet, in_channels: 3, out_channels: 3, width: 0.25 };
-//! (cfg.steps, cfg.batch, cfg.crop, cfg.checkpoint_every) = (2, 1, 16, 0);
-//! let trained = train(&cfg, &samples, &candle_core::Device::Cpu, None, |report| {
+//! (cfg.steps, cfg.batch, cfg.crop) = (2, 1, 16);
+//! let trained = train(&cfg, &samples, &[], &candle_core::Device::Cpu, None, |report| {
 //!     println!("step {} loss {:.4}", report.row.step, report.row.loss);
 //!     ControlFlow::Continue(())
 //! })?;
@@ -30,12 +37,20 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+mod checkpoint;
 mod config;
 mod error;
+mod optim;
+mod plot;
 mod sample;
+mod schedule;
 mod train;
 
+pub use checkpoint::{STATE_KEY, TrainState, read_train_state};
 pub use config::TrainConfig;
 pub use error::{Result, TrainError};
-pub use sample::TrainSample;
-pub use train::{LossRow, Resume, StepReport, Trained, train};
+pub use optim::{Optimizer, OptimizerConfig};
+pub use plot::plot_losses;
+pub use sample::{Augment, Crop, TrainSample};
+pub use schedule::Schedule;
+pub use train::{EpochRow, LossRow, StepReport, Trained, train};

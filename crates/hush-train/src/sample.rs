@@ -1,12 +1,9 @@
 //! Training samples and the random crops, flips and batches drawn from them.
 
-use candle_core::{Device, Tensor};
 use hush_dataset::Image;
 use hush_net::transfer::{Transfer, autoexposure};
-use hush_net::{Features, build_input, prepare_color};
-use rand::rngs::StdRng;
-use rand::seq::SliceRandom;
-use rand::{Rng, SeedableRng};
+use hush_net::{Feature, Features, build_input, prepare_color};
+use serde::{Deserialize, Serialize};
 
 use crate::{Result, TrainError};
 
@@ -56,64 +53,166 @@ impl TrainSample {
     }
 }
 
+/// Data augmentation of the random crops.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Augment {
+    /// Random crops only (the thesis).
+    Crop,
+    /// Random crops in one of 8 orientations (flips and transposition, as OIDN).
+    #[default]
+    Flips,
+    /// As `Flips`, plus OIDN's channel permutations: one random RGB permutation shared by the color, the
+    /// reflectance features and the target, another for the normal's xyz.
+    FlipsPermute,
+}
+
+impl Augment {
+    /// `crop`/`none`, `flips`, `full`/`oidn`/`flips_permute`.
+    pub fn parse(name: &str) -> Option<Self> {
+        Some(match name {
+            "crop" | "none" => Augment::Crop,
+            "flips" | "flip" => Augment::Flips,
+            "full" | "oidn" | "flips_permute" => Augment::FlipsPermute,
+            _ => return None,
+        })
+    }
+}
+
 /// Where one batch item comes from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) struct Crop {
+pub struct Crop {
+    /// Index into the training samples.
     pub sample: usize,
     pub x: usize,
     pub y: usize,
     /// Bit 0: mirror horizontally, bit 1: mirror vertically, bit 2: transpose (8 orientations).
     pub orientation: u8,
+    /// Index into [`PERMUTATIONS`] of the color/reflectance/target channels.
+    pub color_perm: u8,
+    /// Index into [`PERMUTATIONS`] of the normal's channels.
+    pub normal_perm: u8,
 }
 
-/// Draws crops: samples in a freshly shuffled order each epoch, a uniform random window in each, and a
-/// random orientation when augmenting. Everything comes from one seeded generator.
+impl std::fmt::Display for Crop {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "sample {} at ({}, {}) orientation {}", self.sample, self.x, self.y, self.orientation)
+    }
+}
+
+/// The 6 permutations of 3 channels; index 0 is the identity.
+pub const PERMUTATIONS: [[usize; 3]; 6] = [[0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]];
+
+/// Draws crops from a counter-based random stream: the `k`-th crop of the run is a pure function of
+/// (seed, k), so the sampler's whole state is the number of crops drawn, a resumed run continues the same
+/// sequence, and batches can be prepared ahead on another thread. Samples are visited in a freshly
+/// shuffled order per pass; each crop has a uniform random window and, when augmenting, orientation and
+/// channel permutations.
+#[derive(Clone, Debug)]
 pub(crate) struct Sampler {
-    rng: StdRng,
-    order: Vec<usize>,
-    next: usize,
-    pub epoch: usize,
+    seed: u64,
     sizes: Vec<(usize, usize)>,
     crop: usize,
-    augment: bool,
+    augment: Augment,
+    /// The shuffled order of one pass, cached.
+    order: (u64, Vec<usize>),
 }
 
 impl Sampler {
-    pub fn new(seed: u64, samples: &[TrainSample], crop: usize, augment: bool) -> Self {
+    pub fn new(seed: u64, samples: &[TrainSample], crop: usize, augment: Augment) -> Self {
         let sizes = samples.iter().map(|s| (s.input.width, s.input.height)).collect();
-        Sampler { rng: StdRng::seed_from_u64(seed), order: Vec::new(), next: 0, epoch: 0, sizes, crop, augment }
+        Sampler { seed, sizes, crop, augment, order: (u64::MAX, Vec::new()) }
     }
 
-    pub fn next_crop(&mut self) -> Crop {
-        if self.next == self.order.len() {
-            self.order = (0..self.sizes.len()).collect();
-            self.order.shuffle(&mut self.rng);
-            self.next = 0;
-            self.epoch += 1;
+    /// The crop drawn `k`-th (0-based) in the run.
+    pub fn crop(&mut self, k: u64) -> Crop {
+        let n = self.sizes.len() as u64;
+        let pass = k / n;
+        if self.order.0 != pass {
+            let mut rng = SplitMix64::new(self.seed, 0x6f72_6465_72 ^ pass.rotate_left(17));
+            let mut order: Vec<usize> = (0..self.sizes.len()).collect();
+            for i in (1..order.len()).rev() {
+                order.swap(i, rng.below(i as u64 + 1) as usize);
+            }
+            self.order = (pass, order);
         }
-        let sample = self.order[self.next];
-        self.next += 1;
+        let sample = self.order.1[(k % n) as usize];
         let (w, h) = self.sizes[sample];
-        let x = self.rng.random_range(0..=w - self.crop);
-        let y = self.rng.random_range(0..=h - self.crop);
-        let orientation = if self.augment { self.rng.random_range(0..8u8) } else { 0 };
-        Crop { sample, x, y, orientation }
+        let mut rng = SplitMix64::new(self.seed, k);
+        let x = rng.below((w - self.crop + 1) as u64) as usize;
+        let y = rng.below((h - self.crop + 1) as u64) as usize;
+        let (orientation, color_perm, normal_perm) = match self.augment {
+            Augment::Crop => (0, 0, 0),
+            Augment::Flips => (rng.below(8) as u8, 0, 0),
+            Augment::FlipsPermute => (rng.below(8) as u8, rng.below(6) as u8, rng.below(6) as u8),
+        };
+        Crop { sample, x, y, orientation, color_perm, normal_perm }
+    }
+
+    /// The crops of 1-based optimizer step `step` with `batch` crops per step.
+    pub fn batch(&mut self, step: usize, batch: usize) -> Vec<Crop> {
+        let first = (step as u64 - 1) * batch as u64;
+        (first..first + batch as u64).map(|k| self.crop(k)).collect()
     }
 }
 
-/// Copies the crops of one image of each sample into an NCHW tensor (`pick` chooses input or target).
+/// SplitMix64 keyed by (seed, stream).
+struct SplitMix64(u64);
+
+impl SplitMix64 {
+    fn new(seed: u64, stream: u64) -> Self {
+        let mut s = SplitMix64(seed ^ 0x5851_f42d_4c95_7f2d);
+        let a = s.next();
+        SplitMix64(a ^ stream.wrapping_mul(0x9e37_79b9_7f4a_7c15))
+    }
+
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in `0..n` (n > 0), by Lemire's multiply-shift (bias below 2^-32 for the sizes used here).
+    fn below(&mut self, n: u64) -> u64 {
+        ((self.next() as u128 * n as u128) >> 64) as u64
+    }
+}
+
+/// For each input channel, the channel of the unpermuted image it is read from, given the crop's
+/// permutations: color and reflectance features follow `color_perm`, normals `normal_perm`.
+pub(crate) fn channel_sources(features: &Features, crop: &Crop, target: bool) -> Vec<usize> {
+    let cp = PERMUTATIONS[crop.color_perm as usize];
+    let np = PERMUTATIONS[crop.normal_perm as usize];
+    if target {
+        return cp.to_vec();
+    }
+    let mut out = cp.to_vec();
+    for (g, f) in features.aux.iter().enumerate() {
+        let p = if *f == Feature::Normal { np } else { cp };
+        out.extend(p.iter().map(|&k| 3 * (g + 1) + k));
+    }
+    out
+}
+
+/// Copies the crops of the inputs (or targets) into an NCHW buffer of `crops.len() × channels × size²`.
 pub(crate) fn gather(
     samples: &[TrainSample],
+    features: &Features,
     crops: &[Crop],
-    pick: fn(&TrainSample) -> &Image,
+    target: bool,
     size: usize,
-    device: &Device,
-) -> Result<Tensor> {
-    let channels = pick(&samples[crops[0].sample]).channels;
+) -> Vec<f32> {
+    fn pick(s: &TrainSample, target: bool) -> &Image {
+        if target { &s.target } else { &s.input }
+    }
+    let channels = pick(&samples[crops[0].sample], target).channels;
     let plane = size * size;
     let mut data = vec![0f32; crops.len() * channels * plane];
     for (b, crop) in crops.iter().enumerate() {
-        let im = pick(&samples[crop.sample]);
+        let im = pick(&samples[crop.sample], target);
+        let sources = channel_sources(features, crop, target);
         let item = &mut data[b * channels * plane..(b + 1) * channels * plane];
         for oy in 0..size {
             for ox in 0..size {
@@ -125,11 +224,11 @@ pub(crate) fn gather(
                     sy = size - 1 - sy;
                 }
                 let src = ((crop.y + sy) * im.width + crop.x + sx) * channels;
-                for c in 0..channels {
-                    item[c * plane + oy * size + ox] = im.data[src + c];
+                for (c, &from) in sources.iter().enumerate() {
+                    item[c * plane + oy * size + ox] = im.data[src + from];
                 }
             }
         }
     }
-    Ok(Tensor::from_vec(data, (crops.len(), channels, size, size), device)?)
+    data
 }

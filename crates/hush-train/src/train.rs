@@ -1,47 +1,59 @@
 //! The training loop.
 
 use std::ops::ControlFlow;
-use std::time::Instant;
+use std::sync::mpsc::sync_channel;
+use std::time::{Duration, Instant};
 
-use candle_core::{DType, Device, Module};
-use candle_nn::{AdamW, Optimizer, ParamsAdamW, VarBuilder, VarMap};
-use hush_net::{UNet, init_weights, load_weights, read_metadata, save_weights};
+use candle_core::{DType, Device, Module, Tensor};
+use candle_nn::{VarBuilder, VarMap};
+use hush_net::{ALIGNMENT, UNet, hwc_to_nchw, init_weights, save_weights};
 use serde::{Deserialize, Serialize};
 
-use crate::sample::{Sampler, gather};
-use crate::{Result, TrainConfig, TrainError, TrainSample};
+use crate::checkpoint::{TrainState, load_checkpoint, save_checkpoint};
+use crate::sample::{Crop, Sampler, gather};
+use crate::{Optimizer, Result, TrainConfig, TrainError, TrainSample};
 
 /// One line of the loss log.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LossRow {
     /// 1-based optimizer step.
     pub step: usize,
-    /// 1-based pass over the samples (each epoch visits every sample once, in a new random order) that
-    /// the step's last crop belongs to.
+    /// 1-based epoch the step belongs to (an epoch is [`TrainConfig::steps_per_epoch`] steps).
     pub epoch: usize,
     /// The training loss of the step's batch, before the update.
     pub loss: f64,
-    /// Wall-clock seconds since training started.
+    /// The learning rate of the update.
+    pub lr: f64,
+    /// Wall-clock seconds since training (or this resumed part of it) started.
     pub seconds: f64,
+}
+
+/// One line of the per-epoch metrics.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EpochRow {
+    pub epoch: usize,
+    /// The epoch's last step.
+    pub step: usize,
+    /// Mean training loss of the epoch's steps.
+    pub train_loss: f64,
+    /// Mean loss on the test samples (whole images), every `eval_every` epochs and at the end.
+    pub test_loss: Option<f64>,
+    /// The learning rate of the epoch.
+    pub lr: f64,
+    pub seconds: f64,
+    /// The share of the epoch's wall time the step waited for its batch (0: the loader never stalls it).
+    pub loader_share: f64,
+    /// This epoch's test loss is the lowest so far.
+    pub best: bool,
 }
 
 /// What the observer hears after every step.
 #[derive(Clone, Debug)]
 pub struct StepReport {
     pub row: LossRow,
-    /// Self-describing weights (see [`hush_net::save_weights`]) after this step's update, at every
-    /// `checkpoint_every`-th step. Writing them to disk is the caller's job (e.g. with
-    /// `hush_dataset::write_atomic`).
-    pub checkpoint: Option<Vec<u8>>,
-}
-
-/// Where to continue from: weights written by an earlier run of the same configuration and the number of
-/// steps that run had done. The crop sequence continues exactly; Adam's moments start again from zero
-/// (candle does not expose them).
-#[derive(Clone, Copy, Debug)]
-pub struct Resume<'a> {
-    pub weights: &'a [u8],
-    pub step: usize,
+    /// At the end of an epoch: its metrics, and a checkpoint (see [`read_train_state`](crate::read_train_state))
+    /// to continue from. Writing it to disk is the caller's job.
+    pub epoch: Option<(EpochRow, Vec<u8>)>,
 }
 
 /// A finished (or stopped) run.
@@ -50,10 +62,15 @@ pub struct Trained {
     pub weights: Vec<u8>,
     /// The network's variables, for using the result in-process.
     pub varmap: VarMap,
-    /// One row per completed step.
+    /// One row per completed step (of this call).
     pub log: Vec<LossRow>,
+    /// One row per completed epoch (of this call).
+    pub epochs: Vec<EpochRow>,
     /// True if the observer asked to stop before `steps`.
     pub stopped_early: bool,
+    /// Seconds the steps waited for batches, and seconds of training in total.
+    pub loader_seconds: f64,
+    pub seconds: f64,
 }
 
 impl std::fmt::Debug for Trained {
@@ -66,153 +83,268 @@ impl std::fmt::Debug for Trained {
     }
 }
 
-/// Trains a U-Net on `samples` with Adam (AdamW with weight decay 0) at a constant learning rate.
+/// A batch prepared by the loader thread.
+struct Batch {
+    crops: Vec<Crop>,
+    input: Vec<f32>,
+    target: Vec<f32>,
+}
+
+/// Trains a U-Net on `train` samples, measuring the loss on `test` samples (may be empty) every
+/// `eval_every` epochs.
 ///
-/// Every step draws `batch` random `crop`² windows (see [`TrainConfig`]), computes the loss, and updates
-/// the weights. After each step `observer` gets a [`StepReport`]; returning `ControlFlow::Break(())`
-/// stops training after that step (the result has `stopped_early`). Samples are checked first: a NaN or
-/// infinite value is a [`TrainError::Data`] naming the sample and pixel. A non-finite loss or gradient
-/// during training is a [`TrainError::Diverged`] carrying the weights from before that step.
+/// Every step draws `batch` random `crop`² windows (see [`TrainConfig`]), computes the loss and updates the
+/// weights with the configured optimizer at the schedule's learning rate for the step's epoch. Batches
+/// are prepared on a background thread one step ahead. After each step `observer` gets a [`StepReport`]
+/// (with a checkpoint at the end of each epoch); returning `ControlFlow::Break(())` stops training after
+/// that step. `resume` is a checkpoint of an earlier run of the same configuration: training continues
+/// after its step exactly as the uninterrupted run would have.
+///
+/// Samples are checked first: a NaN or infinite value is a [`TrainError::Data`] naming the sample and
+/// pixel. A non-finite loss or gradient during training is a [`TrainError::Diverged`] naming the step and
+/// the batch, carrying the weights from before that step.
 pub fn train(
     cfg: &TrainConfig,
-    samples: &[TrainSample],
+    train: &[TrainSample],
+    test: &[TrainSample],
     device: &Device,
-    resume: Option<Resume>,
+    resume: Option<&[u8]>,
     mut observer: impl FnMut(StepReport) -> ControlFlow<()>,
 ) -> Result<Trained> {
     cfg.validate()?;
-    check_samples(cfg, samples)?;
+    check_samples(cfg, train, "training")?;
+    check_samples(cfg, test, "test")?;
     let info = cfg.model_info();
+    let epoch_steps = cfg.steps_per_epoch(train.len());
+    let epochs = cfg.steps.div_ceil(epoch_steps);
 
     let varmap = VarMap::new();
     let net = UNet::new(VarBuilder::from_varmap(&varmap, DType::F32, device), &cfg.net)?;
-    let mut sampler = Sampler::new(cfg.seed, samples, cfg.crop, cfg.augment);
+    let mut opt = Optimizer::for_varmap(cfg.optimizer.clone(), &varmap)?;
+    let mut best = None;
     let first_step = match resume {
         None => {
             init_weights(&varmap, cfg.seed)?;
             1
         }
-        Some(r) => {
-            match read_metadata(r.weights)? {
-                Some(stored) if stored == info => {}
-                Some(stored) => {
-                    return Err(TrainError::Config(format!(
-                        "cannot resume: the weights were trained with {} (features {}) but this run is {} \
-                         (features {})",
-                        serde_json::to_string(&stored.net).unwrap_or_default(),
-                        stored.features,
-                        serde_json::to_string(&info.net).unwrap_or_default(),
-                        info.features
-                    )));
-                }
-                None => {
-                    return Err(TrainError::Config("cannot resume: the weights carry no hush metadata".into()));
-                }
+        Some(bytes) => {
+            let state = load_checkpoint(bytes, cfg, &varmap, &mut opt, device)?;
+            let changed: Vec<String> = state
+                .config
+                .differences(cfg)
+                .into_iter()
+                .filter(|(k, _, _)| !matches!(k.as_str(), "steps" | "eval_every"))
+                .map(|(k, a, b)| format!("{k}: {a} in the checkpoint, {b} now"))
+                .collect();
+            if !changed.is_empty() {
+                return Err(TrainError::Config(format!(
+                    "cannot resume: the run would not continue as it started ({})",
+                    changed.join("; ")
+                )));
             }
-            load_weights(&varmap, r.weights)?;
-            for _ in 0..r.step * cfg.batch {
-                sampler.next_crop();
+            if state.step % epoch_steps != 0 && state.step != state.config.steps {
+                return Err(TrainError::Config(format!(
+                    "cannot resume: the checkpoint is at step {}, not at the end of an epoch of {epoch_steps} steps",
+                    state.step
+                )));
             }
-            r.step + 1
+            best = state.best;
+            state.step + 1
         }
     };
 
-    let params = ParamsAdamW { lr: cfg.lr, weight_decay: 0.0, ..ParamsAdamW::default() };
-    let vars = varmap.all_vars();
-    let mut opt = AdamW::new(vars.clone(), params)?;
+    let vars: Vec<_> = opt.vars().iter().map(|(_, v)| v.clone()).collect();
     let start = Instant::now();
     let mut log = Vec::new();
+    let mut epoch_rows = Vec::new();
     let mut stopped_early = false;
-    for step in first_step..=cfg.steps {
-        let crops: Vec<_> = (0..cfg.batch).map(|_| sampler.next_crop()).collect();
-        let epoch = sampler.epoch;
-        let input = gather(samples, &crops, |s| &s.input, cfg.crop, device)?;
-        let target = gather(samples, &crops, |s| &s.target, cfg.crop, device)?;
-        let output = net.forward(&input)?;
-        let loss = cfg.loss.compute(&output, &target)?;
-        let value = loss.to_dtype(DType::F64)?.to_scalar::<f64>()?;
-        let diverged = |cause: String, log: Vec<LossRow>| -> Result<Trained> {
-            let weights = save_weights(&varmap, &info)?;
-            let last_good = Trained { weights, varmap: varmap.clone(), log, stopped_early: true };
-            Err(TrainError::Diverged { step, cause, last_good: Box::new(last_good) })
-        };
-        if !value.is_finite() {
-            return diverged(
-                format!(
-                    "the loss is {value}; the inputs were checked finite, so the learning rate ({}) is likely \
-                     too high or the input values far outside [0, 1]",
-                    cfg.lr
-                ),
-                log,
-            );
-        }
-        let grads = loss.backward()?;
-        for var in &vars {
-            if let Some(g) = grads.get(var) {
-                let sum = g.abs()?.sum_all()?.to_dtype(DType::F64)?.to_scalar::<f64>()?;
-                if !sum.is_finite() {
-                    return diverged(
-                        format!(
-                            "the loss ({value}) is finite but a gradient is not (sum |g| = {sum}); the learning \
-                             rate ({}) is likely too high",
-                            cfg.lr
-                        ),
-                        log,
-                    );
+    let mut loader_wait = Duration::ZERO;
+    let (mut epoch_losses, mut epoch_start, mut epoch_wait) = (Vec::new(), Instant::now(), Duration::ZERO);
+    let sampler = Sampler::new(cfg.seed, train, cfg.crop, cfg.augment);
+
+    std::thread::scope(|scope| -> Result<()> {
+        let (tx, rx) = sync_channel::<Batch>(1);
+        let mut loader = sampler.clone();
+        let last_step = cfg.steps;
+        scope.spawn(move || {
+            for step in first_step..=last_step {
+                let crops = loader.batch(step, cfg.batch);
+                let input = gather(train, &cfg.features, &crops, false, cfg.crop);
+                let target = gather(train, &cfg.features, &crops, true, cfg.crop);
+                if tx.send(Batch { crops, input, target }).is_err() {
+                    break;
                 }
             }
+        });
+        for step in first_step..=cfg.steps {
+            let waited = Instant::now();
+            let batch = rx.recv().map_err(|_| TrainError::Data("the batch loader thread stopped".into()))?;
+            loader_wait += waited.elapsed();
+            epoch_wait += waited.elapsed();
+            let epoch = (step - 1) / epoch_steps + 1;
+            let lr = cfg.schedule.lr(cfg.lr, epoch, epochs);
+            let (n, c, s) = (cfg.batch, cfg.net.in_channels, cfg.crop);
+            let input = Tensor::from_vec(batch.input, (n, c, s, s), device)?;
+            let target = Tensor::from_vec(batch.target, (n, 3, s, s), device)?;
+            let output = net.forward(&input)?;
+            let loss = cfg.loss.compute(&output, &target)?;
+            let value = loss.to_dtype(DType::F64)?.to_scalar::<f64>()?;
+            let diverged = |cause: String, log: Vec<LossRow>| -> Result<()> {
+                let weights = save_weights(&varmap, &info)?;
+                let last_good = Trained {
+                    weights,
+                    varmap: varmap.clone(),
+                    log,
+                    epochs: vec![],
+                    stopped_early: true,
+                    loader_seconds: 0.0,
+                    seconds: 0.0,
+                };
+                let batch = batch.crops.iter().map(|c| c.to_string()).collect::<Vec<_>>().join(", ");
+                Err(TrainError::Diverged { step, batch, cause, last_good: Box::new(last_good) })
+            };
+            if !value.is_finite() {
+                return diverged(
+                    format!(
+                        "the loss is {value}; the inputs were checked finite, so the learning rate ({lr}) is likely \
+                         too high or the input values far outside [0, 1]"
+                    ),
+                    std::mem::take(&mut log),
+                );
+            }
+            let grads = loss.backward()?;
+            let mut norm2 = 0f64;
+            for var in &vars {
+                if let Some(g) = grads.get(var) {
+                    norm2 += g.sqr()?.sum_all()?.to_dtype(DType::F64)?.to_scalar::<f64>()?;
+                }
+            }
+            let norm = norm2.sqrt();
+            if !norm.is_finite() {
+                return diverged(
+                    format!(
+                        "the loss ({value}) is finite but the gradient is not (norm {norm}); the learning rate \
+                         ({lr}) is likely too high{}",
+                        if cfg.clip_grad_norm.is_none() { ", or try gradient clipping" } else { "" }
+                    ),
+                    std::mem::take(&mut log),
+                );
+            }
+            let scale = match cfg.clip_grad_norm {
+                Some(max) if norm > max => max / (norm + 1e-6),
+                _ => 1.0,
+            };
+            opt.step(&grads, lr, scale)?;
+            let row = LossRow { step, epoch, loss: value, lr, seconds: start.elapsed().as_secs_f64() };
+            log.push(row);
+            epoch_losses.push(value);
+
+            let mut report = StepReport { row, epoch: None };
+            if step % epoch_steps == 0 || step == cfg.steps {
+                let evaluate = step == cfg.steps || (cfg.eval_every > 0 && epoch % cfg.eval_every == 0);
+                let test_loss =
+                    if evaluate && !test.is_empty() { Some(test_loss(&net, cfg, test, device)?) } else { None };
+                let is_best = test_loss.is_some_and(|t| best.is_none_or(|(_, b)| t < b));
+                if is_best {
+                    best = test_loss.map(|t| (epoch, t));
+                }
+                let seconds = epoch_start.elapsed().as_secs_f64();
+                let epoch_row = EpochRow {
+                    epoch,
+                    step,
+                    train_loss: epoch_losses.iter().sum::<f64>() / epoch_losses.len() as f64,
+                    test_loss,
+                    lr,
+                    seconds: row.seconds,
+                    loader_share: epoch_wait.as_secs_f64() / seconds.max(1e-12),
+                    best: is_best,
+                };
+                let state = TrainState {
+                    step,
+                    epoch,
+                    crops_drawn: (step * cfg.batch) as u64,
+                    optimizer_steps: opt.step_count(),
+                    best,
+                    config: cfg.clone(),
+                };
+                epoch_rows.push(epoch_row);
+                report.epoch = Some((epoch_row, save_checkpoint(&varmap, &opt, &state)?));
+                (epoch_losses, epoch_start, epoch_wait) = (Vec::new(), Instant::now(), Duration::ZERO);
+            }
+            if observer(report).is_break() {
+                stopped_early = step < cfg.steps;
+                break;
+            }
         }
-        opt.step(&grads)?;
-        let row = LossRow { step, epoch, loss: value, seconds: start.elapsed().as_secs_f64() };
-        log.push(row);
-        let checkpoint = if cfg.checkpoint_every > 0 && step % cfg.checkpoint_every == 0 {
-            Some(save_weights(&varmap, &info)?)
-        } else {
-            None
-        };
-        if observer(StepReport { row, checkpoint }).is_break() {
-            stopped_early = step < cfg.steps;
-            break;
-        }
-    }
+        Ok(())
+    })?;
     let weights = save_weights(&varmap, &info)?;
-    Ok(Trained { weights, varmap, log, stopped_early })
+    Ok(Trained {
+        weights,
+        varmap,
+        log,
+        epochs: epoch_rows,
+        stopped_early,
+        loader_seconds: loader_wait.as_secs_f64(),
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// The mean loss over whole test images (each cropped centrally to a multiple of 16 per side).
+fn test_loss(net: &UNet, cfg: &TrainConfig, test: &[TrainSample], device: &Device) -> Result<f64> {
+    let mut sum = 0.0;
+    for s in test {
+        let (w, h) = (s.input.width, s.input.height);
+        let (w16, h16) = (w / ALIGNMENT * ALIGNMENT, h / ALIGNMENT * ALIGNMENT);
+        let (x0, y0) = ((w - w16) / 2, (h - h16) / 2);
+        let crop = |im: &hush_dataset::Image| -> Result<Tensor> {
+            let t = hwc_to_nchw(&im.data, w, h, im.channels, device)?;
+            Ok(t.narrow(2, y0, h16)?.narrow(3, x0, w16)?)
+        };
+        let output = net.forward(&crop(&s.input)?)?.detach();
+        sum += cfg.loss.compute(&output, &crop(&s.target)?)?.to_dtype(DType::F64)?.to_scalar::<f64>()?;
+    }
+    Ok(sum / test.len() as f64)
 }
 
 /// Channel counts, sizes and finiteness of every sample, before any work.
-fn check_samples(cfg: &TrainConfig, samples: &[TrainSample]) -> Result<()> {
-    if samples.is_empty() {
+fn check_samples(cfg: &TrainConfig, samples: &[TrainSample], what_set: &str) -> Result<()> {
+    if samples.is_empty() && what_set == "training" {
         return Err(TrainError::Data("no training samples".into()));
     }
     let want = cfg.net.in_channels;
+    let min = if what_set == "training" { cfg.crop } else { ALIGNMENT };
     for (i, s) in samples.iter().enumerate() {
         let (inp, tgt) = (&s.input, &s.target);
         if inp.channels != want || tgt.channels != 3 {
             return Err(TrainError::Data(format!(
-                "sample {i}: input has {} channels and target {}, the network needs {want} (features {}) and 3",
+                "{what_set} sample {i}: input has {} channels and target {}, the network needs {want} (features {}) \
+                 and 3",
                 inp.channels, tgt.channels, cfg.features
             )));
         }
         if (inp.width, inp.height) != (tgt.width, tgt.height) {
             return Err(TrainError::Data(format!(
-                "sample {i}: input is {}x{} but target is {}x{}",
+                "{what_set} sample {i}: input is {}x{} but target is {}x{}",
                 inp.width, inp.height, tgt.width, tgt.height
             )));
         }
-        if inp.width < cfg.crop || inp.height < cfg.crop {
+        if inp.width < min || inp.height < min {
             return Err(TrainError::Data(format!(
-                "sample {i} is {}x{}, smaller than the {}x{} crop",
-                inp.width, inp.height, cfg.crop, cfg.crop
+                "{what_set} sample {i} is {}x{}, smaller than the {min}x{min} crop",
+                inp.width, inp.height
             )));
         }
         for (what, im) in [("input", inp), ("target", tgt)] {
             if im.data.len() != im.width * im.height * im.channels {
-                return Err(TrainError::Data(format!("sample {i} {what}: data length does not match its size")));
+                return Err(TrainError::Data(format!(
+                    "{what_set} sample {i} {what}: data length does not match its size"
+                )));
             }
             if let Some(k) = im.data.iter().position(|v| !v.is_finite()) {
                 let (p, c) = (k / im.channels, k % im.channels);
                 return Err(TrainError::Data(format!(
-                    "sample {i} {what} is non-finite ({}) at x={} y={} channel {c}; clean the data (e.g. \
+                    "{what_set} sample {i} {what} is non-finite ({}) at x={} y={} channel {c}; clean the data (e.g. \
                      hush_dataset::check_finite) before training",
                     im.data[k],
                     p % im.width,

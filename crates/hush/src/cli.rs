@@ -3,6 +3,7 @@ use std::path::PathBuf;
 use clap::{Args, Parser, Subcommand};
 
 pub use crate::dataset_cmd::DatasetArgs;
+pub use crate::train_cmd::TrainArgs;
 
 #[derive(Parser, Debug)]
 #[command(
@@ -77,45 +78,6 @@ pub struct RenderArgs {
     /// Write timing statistics (paths, wall and CPU seconds, adapter) as JSON.
     #[arg(long)]
     pub stats: Option<PathBuf>,
-}
-
-#[derive(Args, Debug)]
-pub struct TrainArgs {
-    /// Dataset folder (from `hush dataset`).
-    #[arg(long)]
-    pub dataset: PathBuf,
-    /// Run folder: checkpoints, loss log, config and the final model.
-    #[arg(long)]
-    pub out: PathBuf,
-    /// Input features: `color`, `color,albedo,normal` or `color,diffuse,specular,normal`.
-    #[arg(long, default_value = "color,albedo,normal")]
-    pub features: String,
-    /// Noisy images of these spp are the training inputs (all of them if not given).
-    #[arg(long, value_delimiter = ',')]
-    pub spp: Vec<u32>,
-    /// Optimizer steps.
-    #[arg(long, default_value_t = 300)]
-    pub steps: usize,
-    /// Batch size.
-    #[arg(long, default_value_t = 4)]
-    pub batch: usize,
-    /// Square crop size (a multiple of 16).
-    #[arg(long, default_value_t = 64)]
-    pub crop: usize,
-    /// Width multiplier of OIDN's U-Net (1.0 = OIDN's widths).
-    #[arg(long, default_value_t = 0.25)]
-    pub width: f64,
-    /// Adam learning rate.
-    #[arg(long, default_value_t = 1e-3)]
-    pub lr: f64,
-    /// Loss: l1, mse or mix (0.16·L1 + 0.84·(1 − MS-SSIM)).
-    #[arg(long, default_value = "mix")]
-    pub loss: String,
-    /// Save a checkpoint every N steps.
-    #[arg(long, default_value_t = 100)]
-    pub checkpoint_every: usize,
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
 }
 
 #[derive(Args, Debug)]

@@ -1,25 +1,292 @@
+//! `hush train`: options from flags and/or a TOML file, one typed [`RunConfig`] saved as `config.json`,
+//! and the run folder: loss and metric logs, checkpoints, the best and the final model, a loss plot.
+
 use std::ops::ControlFlow;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
+use clap::Args;
 use hush_dataset::{Image, Manifest, Split, load_view, write_atomic};
 use hush_net::transfer::Transfer;
 use hush_net::{Features, Loss, UNetConfig, UNetKind};
-use hush_train::{LossRow, Resume, TrainConfig, TrainError, TrainSample, train};
+use hush_train::{
+    Augment, EpochRow, LossRow, OptimizerConfig, Schedule, TrainConfig, TrainError, TrainSample, plot_losses,
+    read_train_state, train,
+};
 use indicatif::{ProgressBar, ProgressStyle};
+use serde::{Deserialize, Serialize};
 
-use crate::cli::TrainArgs;
-use crate::denoiser::{aux_of, device};
+use crate::denoiser::aux_of;
+
+/// Every option can also be set in a `--config` TOML file under the flag's name (`eval-every = 5`);
+/// flags override the file.
+#[derive(Args, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields, rename_all = "kebab-case")]
+pub struct TrainArgs {
+    /// TOML file with any of the options below, named as the flags (`lr = 1e-4`, `features = "dsnn"`).
+    #[arg(long)]
+    #[serde(skip)]
+    pub config: Option<PathBuf>,
+    /// Continue the run in this folder exactly where it stopped (from its last checkpoint and
+    /// config.json). Only --steps, --epochs, --eval-every and --device may change.
+    #[arg(long)]
+    #[serde(skip)]
+    pub resume: Option<PathBuf>,
+    /// Dataset folder (from `hush dataset`): its training split is trained on, its test split measured.
+    #[arg(long)]
+    pub dataset: Option<PathBuf>,
+    /// Run folder: config.json, loss.csv, metrics.csv, checkpoints/, best.safetensors, model.safetensors.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Input features: `color`, `color,albedo,normal` or `color,diffuse,specular,normal`, or the thesis's
+    /// names M_n, M_ann, M_dsnn [default: color,albedo,normal].
+    #[arg(long)]
+    pub features: Option<String>,
+    /// Noisy images of these spp are the inputs (all of them if not given).
+    #[arg(long, value_delimiter = ',')]
+    pub spp: Option<Vec<u32>>,
+    /// Network: unet (OIDN's), unet_small, unet_large or autoencoder (the thesis's M_DAE) [default: unet].
+    #[arg(long)]
+    pub arch: Option<String>,
+    /// Width multiplier of the network (1.0 = OIDN's widths; the thesis's M1 0.66, M2 0.33) [default: 0.25].
+    #[arg(long)]
+    pub width: Option<f64>,
+    /// Loss: l1, mse, ssim, msssim, mix (0.16·L1 + 0.84·(1 − MS-SSIM)), mape, smape, l1_grad [default: mix].
+    #[arg(long)]
+    pub loss: Option<String>,
+    /// Optimizer: adam, adamw (decoupled weight decay 0.01), sgd, sgd_momentum (0.9) [default: adam].
+    #[arg(long)]
+    pub optimizer: Option<String>,
+    /// Base learning rate (for one_cycle its maximum) [default: 1e-3].
+    #[arg(long)]
+    pub lr: Option<f64>,
+    /// Learning-rate schedule per epoch: constant, step[:every:gamma], lambda:f1,f2,..., exponential[:gamma],
+    /// cosine[:min_lr], sgdr[:t0:t_mult], one_cycle [default: constant].
+    #[arg(long)]
+    pub schedule: Option<String>,
+    /// Train this many epochs (instead of --steps).
+    #[arg(long, conflicts_with = "steps")]
+    pub epochs: Option<usize>,
+    /// Optimizer steps in total [default: 300].
+    #[arg(long)]
+    pub steps: Option<usize>,
+    /// Steps per epoch [default: one pass over the training images, ⌈images / batch⌉].
+    #[arg(long)]
+    pub epoch_steps: Option<usize>,
+    /// Batch size [default: 4].
+    #[arg(long)]
+    pub batch: Option<usize>,
+    /// Square crop size, a multiple of 16 (the thesis: 256) [default: 64].
+    #[arg(long)]
+    pub crop: Option<usize>,
+    /// Augmentation: crop (random crops only), flips (and 8 orientations), full (and OIDN's channel
+    /// permutations) [default: flips].
+    #[arg(long)]
+    pub augment: Option<String>,
+    /// Seed of the initial weights and of the crops [default: 0].
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Every N epochs: test loss, checkpoints/epoch_N.safetensors, the loss plot [default: 10].
+    #[arg(long, alias = "checkpoint-every")]
+    pub eval_every: Option<usize>,
+    /// Clip the gradients' global L2 norm to this.
+    #[arg(long)]
+    pub clip_grad_norm: Option<f64>,
+    /// cpu, or cuda when built with `--features cuda` [default: cpu].
+    #[arg(long)]
+    pub device: Option<String>,
+}
+
+/// Everything a run is: where its data comes from, where it runs, and the training configuration.
+/// Saved as `config.json` in the run folder.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunConfig {
+    pub dataset: PathBuf,
+    /// The spp of the noisy inputs (empty: all).
+    pub spp: Vec<u32>,
+    /// `cpu` or `cuda`.
+    pub device: String,
+    pub train: TrainConfig,
+}
+
+const LOSS_PLOT: &str = "loss-train_blue-test_red.png";
+
+impl TrainArgs {
+    /// Fills every option not given here from `file`.
+    fn or(self, file: TrainArgs) -> TrainArgs {
+        macro_rules! merge {
+            ($($f:ident),*) => { TrainArgs { config: self.config, resume: self.resume, $($f: self.$f.or(file.$f)),* } };
+        }
+        merge!(
+            dataset,
+            out,
+            features,
+            spp,
+            arch,
+            width,
+            loss,
+            optimizer,
+            lr,
+            schedule,
+            epochs,
+            steps,
+            epoch_steps,
+            batch,
+            crop,
+            augment,
+            seed,
+            eval_every,
+            clip_grad_norm,
+            device
+        )
+    }
+}
+
+/// The thesis's feature-set names as aliases of feature lists.
+fn parse_features(s: &str) -> Result<Features> {
+    let alias = match s.trim().to_ascii_lowercase().trim_start_matches("m_") {
+        "n" => Some("color"),
+        "ann" => Some("albedo,normal"),
+        "dsnn" => Some("diffuse,specular,normal"),
+        _ => None,
+    };
+    Ok(Features::parse(alias.unwrap_or(s))?)
+}
+
+fn parse_arch(s: &str) -> Result<UNetKind> {
+    match s {
+        "oidn" => Ok(UNetKind::Unet),
+        "dae" | "m_dae" => Ok(UNetKind::Autoencoder),
+        _ => UNetKind::parse(s)
+            .with_context(|| format!("unknown --arch '{s}': use unet, unet_small, unet_large or autoencoder")),
+    }
+}
 
 fn parse_loss(s: &str) -> Result<Loss> {
     Ok(match s {
         "l1" | "mae" => Loss::L1,
         "l2" | "mse" => Loss::Mse,
         "ssim" => Loss::Ssim,
-        "msssim" | "ms-ssim" => Loss::MsSsim,
+        "msssim" | "ms-ssim" | "ms_ssim" => Loss::MsSsim,
         "mix" | "l1_msssim" => Loss::Mix,
-        _ => bail!("unknown loss '{s}': use l1, mse, ssim, msssim or mix"),
+        _ => serde_json::from_value(serde_json::Value::String(s.into()))
+            .map_err(|_| anyhow::anyhow!("unknown loss '{s}': use l1, mse, ssim, msssim or mix"))?,
     })
+}
+
+/// Builds the run's configuration from the options, taking what they do not give from `base` (the run
+/// being resumed) or else the defaults; `train_images` sizes an epoch.
+fn resolve(args: &TrainArgs, base: Option<&RunConfig>, train_images: usize) -> Result<RunConfig> {
+    let b = base.map(|c| &c.train);
+    let features = match &args.features {
+        Some(f) => parse_features(f)?,
+        None => b.map_or_else(|| parse_features("color,albedo,normal"), |b| Ok(b.features.clone()))?,
+    };
+    let net = UNetConfig {
+        kind: match &args.arch {
+            Some(a) => parse_arch(a)?,
+            None => b.map_or(UNetKind::Unet, |b| b.net.kind),
+        },
+        in_channels: features.in_channels(),
+        out_channels: 3,
+        width: args.width.or(b.map(|b| b.net.width)).unwrap_or(0.25),
+    };
+    let optimizer = match &args.optimizer {
+        Some(o) => OptimizerConfig::parse(o)
+            .with_context(|| format!("unknown --optimizer '{o}': use adam, adamw, sgd or sgd_momentum"))?,
+        None => b.map_or_else(OptimizerConfig::adam, |b| b.optimizer.clone()),
+    };
+    let augment = match &args.augment {
+        Some(a) => Augment::parse(a).with_context(|| format!("unknown --augment '{a}': use crop, flips or full"))?,
+        None => b.map_or(Augment::Flips, |b| b.augment),
+    };
+    let loss = match &args.loss {
+        Some(l) => parse_loss(l)?,
+        None => b.map_or(Loss::Mix, |b| b.loss),
+    };
+    let batch = args.batch.or(b.map(|b| b.batch)).unwrap_or(4);
+    let epoch_steps =
+        args.epoch_steps.or(b.map(|b| b.epoch_steps)).unwrap_or(train_images.div_ceil(batch.max(1)).max(1));
+    let steps = match args.epochs {
+        Some(e) => e * epoch_steps,
+        None => args.steps.or(b.map(|b| b.steps)).unwrap_or(300),
+    };
+    let epochs = steps.div_ceil(epoch_steps.max(1));
+    let schedule = match &args.schedule {
+        Some(s) => Schedule::parse(s, epochs).with_context(|| {
+            format!(
+                "unknown --schedule '{s}': use constant, step[:every:gamma], lambda:f1,f2,..., \
+                 exponential[:gamma], cosine[:min_lr], sgdr[:t0:t_mult] or one_cycle"
+            )
+        })?,
+        None => b.map_or(Schedule::Constant, |b| b.schedule.clone()),
+    };
+    let device = args.device.clone().or(base.map(|c| c.device.clone())).unwrap_or_else(|| "cpu".into());
+    if !matches!(device.as_str(), "cpu" | "cuda") {
+        bail!("unknown --device '{device}': use cpu or cuda");
+    }
+    let train = TrainConfig {
+        features,
+        transfer: Transfer::Pu,
+        net,
+        loss,
+        optimizer,
+        lr: args.lr.or(b.map(|b| b.lr)).unwrap_or(1e-3),
+        schedule,
+        steps,
+        epoch_steps,
+        batch,
+        crop: args.crop.or(b.map(|b| b.crop)).unwrap_or(64),
+        augment,
+        seed: args.seed.or(b.map(|b| b.seed)).unwrap_or(0),
+        eval_every: args.eval_every.or(b.map(|b| b.eval_every)).unwrap_or(10),
+        clip_grad_norm: args.clip_grad_norm.or(b.and_then(|b| b.clip_grad_norm)),
+    };
+    train.validate()?;
+    let dataset = args
+        .dataset
+        .clone()
+        .or(base.map(|c| c.dataset.clone()))
+        .context("--dataset is required (or `dataset = ...` in --config)")?;
+    let spp = args.spp.clone().or(base.map(|c| c.spp.clone())).unwrap_or_default();
+    Ok(RunConfig { dataset, spp, device, train })
+}
+
+fn device(name: &str) -> Result<candle_core::Device> {
+    match name {
+        "cuda" => {
+            #[cfg(feature = "cuda")]
+            return Ok(candle_core::Device::new_cuda(0)?);
+            #[cfg(not(feature = "cuda"))]
+            bail!("--device cuda: this hush was built without CUDA; rebuild with `cargo build -p hush --features cuda`")
+        }
+        _ => Ok(candle_core::Device::Cpu),
+    }
+}
+
+/// The samples of one split at the configured spp, named `scene_view@spp`.
+fn load_split(cfg: &RunConfig, manifest: &Manifest, split: Split) -> Result<(Vec<TrainSample>, Vec<String>)> {
+    let features = &cfg.train.features;
+    let (mut samples, mut names) = (Vec::new(), Vec::new());
+    for view in manifest.split(split) {
+        for record in view.noisy.iter().filter(|r| cfg.spp.is_empty() || cfg.spp.contains(&r.spp)) {
+            let images = load_view(&cfg.dataset, view, record.spp)?;
+            let aux: Vec<&Image> = features.aux.iter().map(|&f| aux_of(&images, f)).collect();
+            if split == Split::Train && images.color.width.min(images.color.height) < cfg.train.crop {
+                bail!(
+                    "{}_{} is {}×{}, smaller than --crop {}: use a smaller crop or a larger dataset --size",
+                    view.scene,
+                    view.view,
+                    images.color.width,
+                    images.color.height,
+                    cfg.train.crop
+                );
+            }
+            samples.push(TrainSample::from_linear(features, Transfer::Pu, &images.color, &aux, &images.reference)?);
+            names.push(format!("{}_{}@{}spp", view.scene, view.view, record.spp));
+        }
+    }
+    Ok((samples, names))
 }
 
 fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
@@ -27,116 +294,197 @@ fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
 }
 
 fn loss_csv(log: &[LossRow]) -> String {
-    let mut csv = String::from("step,epoch,loss,seconds\n");
+    let mut csv = String::from("step,epoch,loss,lr,seconds\n");
     for r in log {
-        csv.push_str(&format!("{},{},{},{:.3}\n", r.step, r.epoch, r.loss, r.seconds));
+        csv.push_str(&format!("{},{},{},{},{:.3}\n", r.step, r.epoch, r.loss, r.lr, r.seconds));
     }
     csv
 }
 
-pub fn run(args: TrainArgs) -> Result<()> {
-    let features = Features::parse(&args.features)?;
-    let loss = parse_loss(&args.loss)?;
-    let manifest = Manifest::load(&args.dataset)?;
-    let views: Vec<_> = manifest.split(Split::Train).collect();
-    if views.is_empty() {
-        bail!("{} has no training views", args.dataset.display());
+fn metrics_csv(rows: &[EpochRow]) -> String {
+    let mut csv = String::from("epoch,step,train_loss,test_loss,lr,seconds,loader_share,best\n");
+    for r in rows {
+        let test = r.test_loss.map(|t| t.to_string()).unwrap_or_default();
+        csv.push_str(&format!(
+            "{},{},{},{test},{},{:.3},{:.4},{}\n",
+            r.epoch, r.step, r.train_loss, r.lr, r.seconds, r.loader_share, r.best
+        ));
     }
+    csv
+}
 
-    let mut samples = Vec::new();
-    for view in &views {
-        for record in view.noisy.iter().filter(|r| args.spp.is_empty() || args.spp.contains(&r.spp)) {
-            let images = load_view(&args.dataset, view, record.spp)?;
-            let aux: Vec<&Image> = features.aux.iter().map(|&f| aux_of(&images, f)).collect();
-            if images.color.width.min(images.color.height) < args.crop {
+fn parse_loss_csv(csv: &str) -> Vec<LossRow> {
+    csv.lines()
+        .skip(1)
+        .filter_map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            Some(LossRow {
+                step: f.first()?.parse().ok()?,
+                epoch: f.get(1)?.parse().ok()?,
+                loss: f.get(2)?.parse().ok()?,
+                lr: f.get(3)?.parse().ok()?,
+                seconds: f.get(4)?.parse().ok()?,
+            })
+        })
+        .collect()
+}
+
+fn parse_metrics_csv(csv: &str) -> Vec<EpochRow> {
+    csv.lines()
+        .skip(1)
+        .filter_map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            Some(EpochRow {
+                epoch: f.first()?.parse().ok()?,
+                step: f.get(1)?.parse().ok()?,
+                train_loss: f.get(2)?.parse().ok()?,
+                test_loss: f.get(3)?.parse().ok(),
+                lr: f.get(4)?.parse().ok()?,
+                seconds: f.get(5)?.parse().ok()?,
+                loader_share: f.get(6)?.parse().ok()?,
+                best: f.get(7)?.parse().ok()?,
+            })
+        })
+        .collect()
+}
+
+/// Explains how `now` differs from the run `stored` in a way that keeps it from continuing; empty if it
+/// may continue (only the budget, evaluation frequency and device may change).
+fn incompatibilities(stored: &RunConfig, now: &RunConfig) -> Vec<String> {
+    let mut out: Vec<String> = stored
+        .train
+        .differences(&now.train)
+        .into_iter()
+        .filter(|(k, _, _)| !matches!(k.as_str(), "steps" | "eval_every"))
+        .map(|(k, a, b)| match k.as_str() {
+            "features" => format!("features: {} in the run, {} now", stored.train.features, now.train.features),
+            _ => format!("{k}: {a} in the run, {b} now"),
+        })
+        .collect();
+    if stored.dataset != now.dataset {
+        out.push(format!("dataset: {} in the run, {} now", stored.dataset.display(), now.dataset.display()));
+    }
+    if stored.spp != now.spp {
+        out.push(format!("spp: {:?} in the run, {:?} now", stored.spp, now.spp));
+    }
+    out
+}
+
+pub fn run(args: TrainArgs) -> Result<()> {
+    let args = match &args.config {
+        Some(path) => {
+            let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+            let file: TrainArgs = toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+            args.or(file)
+        }
+        None => args,
+    };
+    // With --resume the run folder's config.json supplies every option not given.
+    let stored: Option<RunConfig> = {
+        let out = args.resume.as_ref().or(args.out.as_ref()).context("--out is required (or --resume RUN)")?;
+        let path = out.join("config.json");
+        if path.is_file() {
+            let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+            Some(
+                serde_json::from_str(&text)
+                    .with_context(|| format!("{} is not a hush run configuration", path.display()))?,
+            )
+        } else if let Some(run) = &args.resume {
+            bail!("--resume {}: no config.json there; is it a run folder of `hush train`?", run.display());
+        } else {
+            None
+        }
+    };
+    let out = args.resume.clone().or(args.out.clone()).expect("checked above");
+    if let (Some(r), Some(o)) = (&args.resume, &args.out)
+        && r != o
+    {
+        bail!("--resume {} and --out {} name different folders; give one", r.display(), o.display());
+    }
+    let base = if args.resume.is_some() { stored.as_ref() } else { None };
+    let dataset = args
+        .dataset
+        .clone()
+        .or(base.map(|c| c.dataset.clone()))
+        .context("--dataset is required (or `dataset = ...` in --config)")?;
+    let manifest = Manifest::load(&dataset)?;
+    let spp = args.spp.clone().or(base.map(|c| c.spp.clone())).unwrap_or_default();
+    let train_images = manifest
+        .split(Split::Train)
+        .map(|v| v.noisy.iter().filter(|r| spp.is_empty() || spp.contains(&r.spp)).count())
+        .sum::<usize>();
+    if train_images == 0 {
+        bail!("{} has no training images at spp {spp:?}", dataset.display());
+    }
+    let cfg = resolve(&args, base, train_images)?;
+    let (samples, names) = load_split(&cfg, &manifest, Split::Train)?;
+    let (test, _) = load_split(&cfg, &manifest, Split::Test)?;
+
+    let checkpoints = out.join("checkpoints");
+    let last = checkpoints.join("last.safetensors");
+    let config_path = out.join("config.json");
+    let resume_bytes = match &stored {
+        Some(stored) if last.is_file() => {
+            let problems = incompatibilities(stored, &cfg);
+            if !problems.is_empty() {
                 bail!(
-                    "{}_{} is {}×{}, smaller than --crop {}: use a smaller crop or a larger dataset --size",
-                    view.scene,
-                    view.view,
-                    images.color.width,
-                    images.color.height,
-                    args.crop
+                    "{} holds a run that this command cannot continue ({}); choose another --out, or delete the \
+                     folder to start over",
+                    out.display(),
+                    problems.join("; ")
                 );
             }
-            samples.push(TrainSample::from_linear(&features, Transfer::Pu, &images.color, &aux, &images.reference)?);
+            Some(std::fs::read(&last).with_context(|| format!("reading {}", last.display()))?)
         }
-    }
-    if samples.is_empty() {
-        bail!("no training images at spp {:?} in {}", args.spp, args.dataset.display());
-    }
-
-    let cfg = TrainConfig {
-        net: UNetConfig {
-            kind: UNetKind::Unet,
-            in_channels: features.in_channels(),
-            out_channels: 3,
-            width: args.width,
-        },
-        features,
-        transfer: Transfer::Pu,
-        loss,
-        lr: args.lr,
-        steps: args.steps,
-        batch: args.batch,
-        crop: args.crop,
-        seed: args.seed,
-        checkpoint_every: args.checkpoint_every,
-        augment: true,
+        _ if args.resume.is_some() => bail!("--resume {}: it has no checkpoints/last.safetensors yet", out.display()),
+        _ => None,
     };
-    cfg.validate()?;
-    let checkpoints = args.out.join("checkpoints");
     std::fs::create_dir_all(&checkpoints).with_context(|| format!("creating {}", checkpoints.display()))?;
-    let config_path = args.out.join("config.json");
-    let config_json = serde_json::to_string_pretty(&cfg)?;
+    write_file(&config_path, serde_json::to_string_pretty(&cfg)?.as_bytes())?;
 
-    // Resume from the latest checkpoint of the same configuration.
-    let latest = checkpoints.join("latest.safetensors");
-    let mut resume_from = None;
-    if config_path.is_file() && latest.is_file() {
-        let stored = std::fs::read_to_string(&config_path)?;
-        if stored != config_json {
-            bail!(
-                "{} holds a run with another configuration: choose another --out, or delete the folder to start over",
-                args.out.display()
-            );
-        }
-        let step: usize = std::fs::read_to_string(checkpoints.join("latest.step"))
-            .context("reading checkpoints/latest.step")?
-            .trim()
-            .parse()
-            .context("checkpoints/latest.step is not a step number")?;
-        resume_from = Some((std::fs::read(&latest)?, step));
-    }
-    write_file(&config_path, config_json.as_bytes())?;
-    let mut log: Vec<LossRow> = match &resume_from {
-        Some(_) => parse_log(&std::fs::read_to_string(args.out.join("loss.csv")).unwrap_or_default()),
-        None => Vec::new(),
-    };
-    if let Some((_, step)) = &resume_from {
-        log.retain(|r| r.step <= *step);
-        eprintln!("resuming at step {step} from {} (Adam's moment estimates restart from zero)", latest.display());
+    let (mut log, mut metrics) = (Vec::new(), Vec::new());
+    let mut start_step = 0;
+    if let Some(bytes) = &resume_bytes {
+        let state = read_train_state(bytes)?.context("checkpoints/last.safetensors carries no training state")?;
+        log = parse_loss_csv(&std::fs::read_to_string(out.join("loss.csv")).unwrap_or_default());
+        log.retain(|r| r.step <= state.step);
+        metrics = parse_metrics_csv(&std::fs::read_to_string(out.join("metrics.csv")).unwrap_or_default());
+        metrics.retain(|r| r.epoch <= state.epoch);
+        start_step = state.step;
+        eprintln!("resuming {} at step {} (epoch {})", out.display(), state.step, state.epoch);
     }
 
-    eprintln!("training on {} images ({} views) with {}", samples.len(), views.len(), cfg.features);
-    let bar = ProgressBar::new(cfg.steps as u64);
+    let t = &cfg.train;
+    let epochs = t.steps.div_ceil(t.epoch_steps);
+    eprintln!(
+        "training on {} images, testing on {}, with {}: {} steps = {epochs} epochs of {} steps",
+        samples.len(),
+        test.len(),
+        t.features,
+        t.steps,
+        t.epoch_steps
+    );
+    let bar = ProgressBar::new(t.steps as u64);
     bar.set_style(
         ProgressStyle::with_template("train [{bar:30}] {pos}/{len} steps {msg} eta {eta}")
             .expect("valid template")
             .progress_chars("=> "),
     );
-    let resume = resume_from.as_ref().map(|(w, step)| Resume { weights: w, step: *step });
-    bar.set_position(resume.as_ref().map_or(0, |r| r.step as u64));
+    bar.set_position(start_step as u64);
     let mut write_error = None;
-    let result = train(&cfg, &samples, &device()?, resume, |report| {
+    let result = train(t, &samples, &test, &device(&cfg.device)?, resume_bytes.as_deref(), |report| {
         let r = &report.row;
         bar.set_position(r.step as u64);
-        bar.set_message(format!("loss {:.4}, {:.2} steps/s", r.loss, r.step as f64 / r.seconds.max(1e-9)));
-        log.push(r.clone());
-        if let Some(bytes) = report.checkpoint {
-            let saved = write_file(&checkpoints.join(format!("step_{:06}.safetensors", r.step)), &bytes)
-                .and_then(|_| write_file(&latest, &bytes))
-                .and_then(|_| write_file(&checkpoints.join("latest.step"), r.step.to_string().as_bytes()))
-                .and_then(|_| write_file(&args.out.join("loss.csv"), loss_csv(&log).as_bytes()));
+        bar.set_message(format!(
+            "epoch {} loss {:.4}, {:.2} steps/s",
+            r.epoch,
+            r.loss,
+            (r.step - start_step) as f64 / r.seconds.max(1e-9)
+        ));
+        log.push(*r);
+        if let Some((row, bytes)) = report.epoch {
+            metrics.push(row);
+            let saved = save_epoch(&out, &log, &metrics, &row, &bytes);
             if let Err(e) = saved {
                 write_error = Some(e);
                 return ControlFlow::Break(());
@@ -150,39 +498,79 @@ pub fn run(args: TrainArgs) -> Result<()> {
     }
     let trained = match result {
         Ok(t) => t,
-        Err(TrainError::Diverged { step, cause, last_good }) => {
-            let path = args.out.join("last_good.safetensors");
+        Err(TrainError::Diverged { step, batch, cause, last_good }) => {
+            let path = out.join("last_good.safetensors");
             write_file(&path, &last_good.weights)?;
-            write_file(&args.out.join("loss.csv"), loss_csv(&log).as_bytes())?;
+            write_file(&out.join("loss.csv"), loss_csv(&log).as_bytes())?;
+            let batch = name_batch(&batch, &names);
             bail!(
-                "training diverged at step {step}: {cause}. The weights from before it are in {}; \
-                 try a lower --lr (now {})",
+                "training diverged at step {step} on the batch [{batch}]: {cause}. The weights from before that \
+                 step are in {}, the last epoch's checkpoint in {}; try a lower --lr (now {}) or --clip-grad-norm",
                 path.display(),
-                cfg.lr
+                last.display(),
+                t.lr
             );
         }
         Err(e) => return Err(e.into()),
     };
-    let model = args.out.join("model.safetensors");
+    let model = out.join("model.safetensors");
     write_file(&model, &trained.weights)?;
-    write_file(&args.out.join("loss.csv"), loss_csv(&log).as_bytes())?;
+    let steps_done = trained.log.len();
+    let summary = serde_json::json!({
+        "steps": steps_done,
+        "seconds": trained.seconds,
+        "steps_per_second": steps_done as f64 / trained.seconds.max(1e-9),
+        "loader_share": trained.loader_seconds / trained.seconds.max(1e-9),
+        "final_loss": log.last().map(|r| r.loss),
+        "best": metrics.iter().rev().find(|r| r.best).map(|r| serde_json::json!({"epoch": r.epoch, "test_loss": r.test_loss})),
+        "threads": std::env::var("RAYON_NUM_THREADS").ok(),
+    });
+    write_file(&out.join("summary.json"), serde_json::to_string_pretty(&summary)?.as_bytes())?;
     let first = log.first().map(|r| r.loss).unwrap_or(f64::NAN);
-    let last = log.last().map(|r| r.loss).unwrap_or(f64::NAN);
-    eprintln!("trained {} steps: loss {first:.4} → {last:.4}; model {}", cfg.steps, model.display());
+    let final_loss = log.last().map(|r| r.loss).unwrap_or(f64::NAN);
+    let test_note = match metrics.iter().rev().find(|r| r.best) {
+        Some(b) => format!("; best test loss {:.4} at epoch {}", b.test_loss.unwrap_or(f64::NAN), b.epoch),
+        None => String::new(),
+    };
+    eprintln!(
+        "trained {} steps: loss {first:.4} → {final_loss:.4}{test_note}; {:.2} steps/s, the loader's share {:.1}%; \
+         model {}",
+        t.steps,
+        steps_done as f64 / trained.seconds.max(1e-9),
+        100.0 * trained.loader_seconds / trained.seconds.max(1e-9),
+        model.display()
+    );
     Ok(())
 }
 
-fn parse_log(csv: &str) -> Vec<LossRow> {
-    csv.lines()
-        .skip(1)
-        .filter_map(|l| {
-            let f: Vec<&str> = l.split(',').collect();
-            Some(LossRow {
-                step: f.first()?.parse().ok()?,
-                epoch: f.get(1)?.parse().ok()?,
-                loss: f.get(2)?.parse().ok()?,
-                seconds: f.get(3)?.parse().ok()?,
-            })
+/// The end of an epoch on disk: the logs first, then the checkpoints, the plot, and last the resume point
+/// `checkpoints/last.safetensors` (each file written atomically), so a killed run resumes from a
+/// consistent epoch and drops the log rows after it.
+fn save_epoch(out: &Path, log: &[LossRow], metrics: &[EpochRow], row: &EpochRow, bytes: &[u8]) -> Result<()> {
+    write_file(&out.join("loss.csv"), loss_csv(log).as_bytes())?;
+    write_file(&out.join("metrics.csv"), metrics_csv(metrics).as_bytes())?;
+    if row.test_loss.is_some() {
+        write_file(&out.join("checkpoints").join(format!("epoch_{:04}.safetensors", row.epoch)), bytes)?;
+        let png = plot_losses(metrics, 800, 500).map_err(anyhow::Error::msg)?;
+        write_file(&out.join(LOSS_PLOT), &png)?;
+    }
+    if row.best {
+        write_file(&out.join("best.safetensors"), bytes)?;
+    }
+    write_file(&out.join("checkpoints").join("last.safetensors"), bytes)
+}
+
+/// `sample 3 at (...)` → `cbox_v001@4spp at (...)`.
+fn name_batch(batch: &str, names: &[String]) -> String {
+    batch
+        .split(", ")
+        .map(|item| {
+            let index = item.strip_prefix("sample ").and_then(|r| r.split(' ').next()?.parse::<usize>().ok());
+            match index.and_then(|i| names.get(i).map(|n| (i, n))) {
+                Some((i, n)) => item.replacen(&format!("sample {i}"), n, 1),
+                None => item.to_string(),
+            }
         })
-        .collect()
+        .collect::<Vec<_>>()
+        .join(", ")
 }

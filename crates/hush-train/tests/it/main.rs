@@ -1,12 +1,18 @@
 //! hush-train's integration tests: tiny synthetic denoising problems, seconds in total.
 
+mod optim;
+mod schedule;
+
 use std::ops::ControlFlow;
 
 use candle_core::Device;
 use hush_dataset::Image;
 use hush_net::transfer::{Transfer, autoexposure};
 use hush_net::{Features, UNetConfig, UNetKind, load_model, prepare_color};
-use hush_train::{Resume, TrainConfig, TrainError, TrainSample, Trained, train};
+use hush_train::{
+    Augment, EpochRow, OptimizerConfig, Schedule, TrainConfig, TrainError, TrainSample, Trained, plot_losses,
+    read_train_state, train,
+};
 
 /// Deterministic noise in [-1, 1).
 fn noise(i: usize, seed: u64) -> f32 {
@@ -38,7 +44,7 @@ fn config(steps: usize) -> TrainConfig {
     cfg.steps = steps;
     cfg.batch = 4;
     cfg.crop = 32;
-    cfg.checkpoint_every = 0;
+    cfg.eval_every = 0;
     // 10× the thesis' rate so that 30 steps show progress on this toy problem.
     cfg.lr = 1e-3;
     cfg.seed = 11;
@@ -46,7 +52,7 @@ fn config(steps: usize) -> TrainConfig {
 }
 
 fn run(cfg: &TrainConfig, samples: &[TrainSample]) -> hush_train::Result<Trained> {
-    train(cfg, samples, &Device::Cpu, None, |_| ControlFlow::Continue(()))
+    train(cfg, samples, &[], &Device::Cpu, None, |_| ControlFlow::Continue(()))
 }
 
 fn losses(t: &Trained) -> Vec<f64> {
@@ -113,61 +119,152 @@ fn diverging_loss_stops_with_the_last_good_weights() {
     let err = run(&cfg, &samples).unwrap_err();
     let msg = err.to_string();
     assert!(msg.contains("step 1") && msg.contains("learning rate"), "{msg}");
-    let TrainError::Diverged { step, last_good, .. } = err else { panic!("expected Diverged, got {msg}") };
+    let TrainError::Diverged { step, batch, last_good, .. } = err else { panic!("expected Diverged, got {msg}") };
     assert_eq!(step, 1);
+    assert!(batch.contains("sample 0") && batch.contains("sample 1"), "{batch}");
     assert!(last_good.log.is_empty());
     let (_, info) = load_model(&last_good.weights, &Device::Cpu).unwrap();
     assert_eq!(info, cfg.model_info());
 }
 
+/// Every epoch ends with its metrics and a checkpoint that `hush denoise` can load as a model; the test
+/// loss is measured every `eval_every` epochs and at the end, and the best one is marked.
 #[test]
-fn checkpoints_are_handed_out_and_loadable() {
-    let samples = synthetic(2);
+fn epochs_report_metrics_and_checkpoints() {
+    let samples = synthetic(4);
+    let test = synthetic(1);
     let mut cfg = config(7);
-    cfg.checkpoint_every = 3;
+    (cfg.batch, cfg.eval_every) = (2, 2); // 2 steps per epoch: epochs end at steps 2, 4, 6 and 7
     let mut got = Vec::new();
-    let trained = train(&cfg, &samples, &Device::Cpu, None, |r| {
-        if let Some(bytes) = r.checkpoint {
-            got.push((r.row.step, bytes));
+    let trained = train(&cfg, &samples, &test, &Device::Cpu, None, |r| {
+        if let Some((row, bytes)) = r.epoch {
+            got.push((row, bytes));
         }
         ControlFlow::Continue(())
     })
     .unwrap();
-    assert_eq!(got.iter().map(|(s, _)| *s).collect::<Vec<_>>(), vec![3, 6]);
-    for (_, bytes) in &got {
+    let rows: Vec<EpochRow> = got.iter().map(|(r, _)| *r).collect();
+    assert_eq!(rows.iter().map(|r| (r.epoch, r.step)).collect::<Vec<_>>(), vec![(1, 2), (2, 4), (3, 6), (4, 7)]);
+    assert_eq!(rows.iter().map(|r| r.test_loss.is_some()).collect::<Vec<_>>(), vec![false, true, false, true]);
+    assert_eq!(rows, trained.epochs);
+    let log = &trained.log;
+    assert_eq!(rows[1].train_loss, (log[2].loss + log[3].loss) / 2.0);
+    assert!(rows[1].best, "the first test loss is the best so far");
+    assert_eq!(rows[3].best, rows[3].test_loss.unwrap() < rows[1].test_loss.unwrap());
+    assert!(rows.iter().all(|r| (0.0..=1.0).contains(&r.loader_share)));
+    for (row, bytes) in &got {
         let (_, info) = load_model(bytes, &Device::Cpu).unwrap();
         assert_eq!(info, cfg.model_info());
+        let state = read_train_state(bytes).unwrap().unwrap();
+        assert_eq!((state.step, state.epoch, state.crops_drawn), (row.step, row.epoch, 2 * row.step as u64));
+        assert_eq!(state.config, cfg);
     }
-    assert_ne!(got[1].1, trained.weights, "the final weights are after step 7, not 6");
+    assert_eq!(read_train_state(&trained.weights).unwrap(), None, "the final weights are a plain model");
+    let png = plot_losses(&rows, 320, 200).unwrap();
+    assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
 }
 
-/// Resuming from step-3 weights continues the same crop sequence: its first loss (computed before any
-/// update) equals the uninterrupted run's loss at step 4 exactly.
+/// Resuming from a mid-run checkpoint continues exactly: the same losses, step for step, and the same
+/// final weights as the uninterrupted run, for Adam with a schedule and for SGD with momentum.
 #[test]
-fn resume_continues_the_run() {
+fn resume_continues_exactly() {
     let samples = synthetic(3);
-    let full = run(&config(5), &samples).unwrap();
-    let first = run(&config(3), &samples).unwrap();
-    let resumed = train(&config(5), &samples, &Device::Cpu, Some(Resume { weights: &first.weights, step: 3 }), |_| {
+    for (optimizer, schedule) in [
+        (OptimizerConfig::adam(), Schedule::Cosine { min_lr: 0.0, t_max: 0 }),
+        (OptimizerConfig::sgd(0.9), Schedule::Constant),
+    ] {
+        let mut cfg = config(6);
+        (cfg.batch, cfg.optimizer, cfg.schedule, cfg.augment) = (2, optimizer, schedule, Augment::FlipsPermute);
+        let mut checkpoint = None;
+        let full = train(&cfg, &samples, &[], &Device::Cpu, None, |r| {
+            if let Some((row, bytes)) = r.epoch
+                && row.step == 2
+            {
+                checkpoint = Some(bytes);
+            }
+            ControlFlow::Continue(())
+        })
+        .unwrap();
+        let resumed =
+            train(&cfg, &samples, &[], &Device::Cpu, Some(&checkpoint.unwrap()), |_| ControlFlow::Continue(()))
+                .unwrap();
+        assert_eq!(resumed.log.iter().map(|r| r.step).collect::<Vec<_>>(), vec![3, 4, 5, 6]);
+        let tail: Vec<(f64, f64)> = full.log[2..].iter().map(|r| (r.loss, r.lr)).collect();
+        assert_eq!(resumed.log.iter().map(|r| (r.loss, r.lr)).collect::<Vec<_>>(), tail, "{:?}", cfg.optimizer);
+        assert_eq!(resumed.weights, full.weights, "{:?}", cfg.optimizer);
+    }
+}
+
+/// A checkpoint refuses to continue another network or feature set, naming both, and another optimizer.
+#[test]
+fn resume_refuses_another_run() {
+    let samples = synthetic(2);
+    let mut cfg = config(2);
+    cfg.batch = 2;
+    let mut checkpoint = None;
+    train(&cfg, &samples, &[], &Device::Cpu, None, |r| {
+        checkpoint = r.epoch.map(|(_, b)| b).or(checkpoint.take());
         ControlFlow::Continue(())
     })
     .unwrap();
-    assert_eq!(resumed.log.iter().map(|r| r.step).collect::<Vec<_>>(), vec![4, 5]);
-    assert_eq!(resumed.log[0].loss, full.log[3].loss);
+    let checkpoint = checkpoint.unwrap();
+    let resume = |c: &TrainConfig, s: &[TrainSample]| {
+        train(c, s, &[], &Device::Cpu, Some(&checkpoint), |_| ControlFlow::Continue(())).unwrap_err().to_string()
+    };
+    let mut wider = cfg.clone();
+    (wider.net.width, wider.steps) = (0.5, 4);
+    let err = resume(&wider, &samples);
+    assert!(err.contains("cannot resume") && err.contains("width 0.25") && err.contains("width 0.5"), "{err}");
 
-    let mut wider = config(5);
-    wider.net.width = 0.5;
-    let err = train(&wider, &samples, &Device::Cpu, Some(Resume { weights: &first.weights, step: 3 }), |_| {
-        ControlFlow::Continue(())
-    })
-    .unwrap_err();
-    assert!(err.to_string().contains("cannot resume"), "{err}");
+    let mut with_normals = cfg.clone();
+    with_normals.features = Features::parse("nrm").unwrap();
+    with_normals.net.in_channels = 6;
+    let normal = Image::from_fn(32, 32, 3, |_, _, c| if c == 2 { 1.0 } else { 0.0 });
+    let six: Vec<TrainSample> = samples
+        .iter()
+        .map(|s| TrainSample { input: Image::concat_channels(&[&s.input, &normal]).unwrap(), target: s.target.clone() })
+        .collect();
+    let err = resume(&with_normals, &six);
+    assert!(err.contains("on features hdr, but") && err.contains("on features hdr,nrm"), "{err}");
+
+    let mut sgd = cfg.clone();
+    (sgd.optimizer, sgd.steps) = (OptimizerConfig::sgd(0.9), 4);
+    assert!(resume(&sgd, &samples).contains("optimizer"));
+    let mut other_seed = cfg.clone();
+    (other_seed.seed, other_seed.steps) = (99, 4);
+    let err = resume(&other_seed, &samples);
+    assert!(err.contains("seed: 11 in the checkpoint, 99 now"), "{err}");
+}
+
+/// Gradient clipping keeps a step with a huge learning rate bounded: after one SGD step at lr 1e3 with the
+/// gradient norm clipped to 1e-6, no weight moves by more than 1e-3.
+#[test]
+fn gradient_clipping_bounds_the_update() {
+    let samples = synthetic(2);
+    let mut cfg = config(1);
+    (cfg.optimizer, cfg.lr, cfg.clip_grad_norm) = (OptimizerConfig::sgd(0.0), 1e3, Some(1e-6));
+    let before = run(
+        &{
+            let mut c = cfg.clone();
+            c.lr = 1e-30;
+            c
+        },
+        &samples,
+    )
+    .unwrap();
+    let after = run(&cfg, &samples).unwrap();
+    let weights = |t: &Trained| -> Vec<f32> {
+        let (net, _) = load_model(&t.weights, &Device::Cpu).unwrap();
+        net.named_tensors().iter().flat_map(|(_, t)| t.flatten_all().unwrap().to_vec1::<f32>().unwrap()).collect()
+    };
+    let moved = weights(&before).iter().zip(weights(&after)).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    assert!(moved > 0.0 && moved <= 1e-3, "largest change {moved}");
 }
 
 #[test]
 fn observer_can_stop_training() {
     let samples = synthetic(2);
-    let trained = train(&config(10), &samples, &Device::Cpu, None, |r| {
+    let trained = train(&config(10), &samples, &[], &Device::Cpu, None, |r| {
         if r.row.step == 2 { ControlFlow::Break(()) } else { ControlFlow::Continue(()) }
     })
     .unwrap();
@@ -188,7 +285,7 @@ fn bad_configurations_and_data_are_refused() {
     cfg.features = Features::parse("alb").unwrap();
     assert!(run(&cfg, &samples).unwrap_err().to_string().contains("input channels"));
     cfg.net.in_channels = 6;
-    assert!(run(&cfg, &samples).unwrap_err().to_string().contains("sample 0: input has 3 channels"));
+    assert!(run(&cfg, &samples).unwrap_err().to_string().contains("training sample 0: input has 3 channels"));
     let mut cfg = config(2);
     cfg.lr = 0.0;
     assert!(matches!(run(&cfg, &samples), Err(TrainError::Config(_))));
