@@ -1,10 +1,13 @@
 //! Integration tests of hush-eval (one binary, modules by topic).
 
 mod golden;
+mod html;
 mod metrics;
+mod pictures;
 mod report;
 mod timing;
 mod tonemap;
+mod tradeoff;
 
 use std::path::{Path, PathBuf};
 
