@@ -3,6 +3,7 @@
 
 mod bench;
 mod demo;
+mod eval;
 mod mitsuba;
 mod test;
 mod util;
@@ -13,6 +14,10 @@ const USAGE: &str = "usage: cargo xtask <task>
 tasks:
   test [cargo test args]     install a Vulkan driver if none is present, then run every test
   demo [--release] [--resume] render → dataset → train → eval → report on the bundled Cornell box
+  eval [--release] [--check-html] [--timing-runs N]
+                             hush eval on the demo's dataset and model with every baseline: report,
+                             error against run time, pictures in target/eval/ (--check-html: render
+                             report.html in headless Chromium)
   bench render [--release] [--spp N]
                              M paths per CPU-second and relMSE × CPU-seconds on the Cornell box
                              (512², max_depth 8), hush against Mitsuba 3 when it is installed
@@ -26,6 +31,7 @@ fn main() -> ExitCode {
     let result = match args.first().map(String::as_str) {
         Some("demo") => demo::run(&args[1..]),
         Some("bench") => bench::run(&args[1..]),
+        Some("eval") => eval::run(&args[1..]),
         Some("test") => test::run(&args[1..]),
         Some("mitsuba") => mitsuba::run(&args[1..]),
         _ => Err(USAGE.to_string()),

@@ -112,7 +112,7 @@ pub struct EvalArgs {
     #[arg(long = "model")]
     pub models: Vec<PathBuf>,
     /// Baselines to evaluate by name; repeatable or comma-separated. `noisy` (raw path tracing) is always
-    /// evaluated; an unknown name is an error listing the known ones.
+    /// evaluated; `all` asks for every known baseline; an unknown name is an error listing the known ones.
     #[arg(long = "baseline", value_delimiter = ',')]
     pub baselines: Vec<String>,
     /// Noisy inputs at these spp (all stored ones if not given).

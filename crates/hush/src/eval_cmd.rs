@@ -71,7 +71,7 @@ fn timed(runs: usize, denoise: impl Fn() -> Result<Image>) -> Result<(Image, f64
     }
 }
 
-/// The names `--baseline` accepts, with what they are.
+/// The names `--baseline` accepts, with what they are (`all` asks for every one).
 pub const BASELINES: &[(&str, &str)] = &[(NOISY, "the noisy input (raw path tracing); always evaluated")];
 
 /// A baseline asked for by name: ready to run, or skipped with the reason and the command that installs it.
@@ -88,7 +88,7 @@ fn baseline(name: &str) -> Result<Option<Baseline>> {
         NOISY => Ok(None),
         _ => {
             let known: Vec<String> = BASELINES.iter().map(|(n, what)| format!("{n} ({what})")).collect();
-            bail!("unknown baseline '{name}': known baselines are {}", known.join(", "))
+            bail!("unknown baseline '{name}': known baselines are {} (`all` asks for every one)", known.join(", "))
         }
     }
 }
@@ -118,7 +118,9 @@ pub fn run(args: EvalArgs) -> Result<()> {
             .push(format!("Model {name}: {:?} width {} on features {}.", info.net.kind, info.net.width, info.features));
         methods.push(Box::new(Model { name, denoiser }));
     }
-    for name in &args.baselines {
+    let all: Vec<String> = BASELINES.iter().map(|(name, _)| name.to_string()).collect();
+    let baselines = if args.baselines.iter().any(|b| b == "all") { &all } else { &args.baselines };
+    for name in baselines {
         match baseline(name)? {
             None => {}
             Some(Baseline::Ready(method)) => methods.push(method),
