@@ -405,7 +405,7 @@ impl Report {
 pub const TRADEOFF_INTRO: &str = "\
 For each test view, error against seconds on log-log axes: raw path tracing along the spp ladder (render \
 seconds), and each denoiser at each input spp (render seconds of its input + denoise seconds). Grid lines mark \
-powers of ten. A denoiser \"reaches the error of raw N spp in X % of its time\" when raw path tracing needs \
+powers of ten, labelled 1e-2 etc. A denoiser \"reaches the error of raw N spp in X % of its time\" when raw path tracing needs \
 N spp (interpolated) to reach the denoiser's error and the denoiser costs X % of that time; equal time gives raw \
 path tracing's error after the denoiser's seconds.";
 

@@ -210,7 +210,7 @@ fn pictures_of(
 ) -> Result<Vec<Figure>> {
     let Some((_, noisy)) = outputs.iter().find(|(m, _)| m == NOISY) else { return Ok(Vec::new()) };
     let side = (reference.width.min(reference.height) / 2).clamp(1, 128);
-    let zoom = (256 / side).clamp(1, 4);
+    let zoom = (256 / side).clamp(1, 8);
     let (x, y) = pictures::worst_window(noisy, reference, exposure, side)?;
     let write = |file: String, picture: &Rgb8| -> Result<String> {
         let path = dir.join(&file);
