@@ -140,8 +140,9 @@ pub fn run(args: EvalArgs) -> Result<()> {
 
     report.notes.insert(0, format!("Dataset: {} ({} test views).", args.dataset.display(), views.len()));
     report.notes.push(format!(
-        "Machine: {} logical CPUs{}; denoise time is the median of {} warm runs on {}; render times are those \
+        "Machine: {}{} logical CPUs{}; denoise time is the median of {} warm runs on {}; render times are those \
          the dataset's manifest recorded on the machine that rendered it.",
+        cpu_model().map(|m| format!("{m}, ")).unwrap_or_default(),
         std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
         std::env::var("RAYON_NUM_THREADS").map(|n| format!(", RAYON_NUM_THREADS={n}")).unwrap_or_default(),
         args.timing_runs.max(1),
@@ -250,6 +251,13 @@ fn pictures_of(
                 .into(),
         },
     ])
+}
+
+/// The CPU's model name (Linux's /proc/cpuinfo), if known.
+fn cpu_model() -> Option<String> {
+    let info = std::fs::read_to_string("/proc/cpuinfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("model name"))?;
+    Some(line.split_once(':')?.1.trim().to_string())
 }
 
 /// A method name as part of a file name: `/` and other unsafe characters become `-`.
