@@ -83,6 +83,11 @@ enum Baseline {
 }
 
 /// The baseline called `name`; `None` for `noisy`, which is always evaluated.
+///
+/// A new baseline is a name in [`BASELINES`] and an arm here. An in-process filter is a `Method` whose `run`
+/// wraps its call in [`timed`] (e.g. `timed(runs, || Ok(guided::denoise(&images.color, &images.albedo,
+/// &images.normal)?))`); an external one that measures its own seconds returns them directly; one that is
+/// not installed returns `Baseline::Skipped` with the reason and the install command.
 fn baseline(name: &str) -> Result<Option<Baseline>> {
     match name {
         NOISY => Ok(None),
