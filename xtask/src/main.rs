@@ -14,7 +14,7 @@ const USAGE: &str = "usage: cargo xtask <task>
 tasks:
   test [cargo test args]     install a Vulkan driver if none is present, then run every test
   demo [--release] [--resume] render → dataset → train → eval → report on the bundled Cornell box
-  eval [--release] [--check-html] [--timing-runs N]
+  eval [--release] [--check-html] [--timing-runs N] [--dataset DIR --model FILE] [--out DIR]
                              hush eval on the demo's dataset and model with every baseline: report,
                              error against run time, pictures in target/eval/ (--check-html: render
                              report.html in headless Chromium)

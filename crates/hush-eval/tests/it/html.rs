@@ -115,13 +115,23 @@ fn html_renders_in_chromium() {
         let log = String::from_utf8_lossy(&out.stderr);
         let errors: Vec<&str> = log
             .lines()
-            .filter(|l| l.contains(":CONSOLE(") || l.contains("net::ERR_") || l.contains("Uncaught"))
+            .filter(|l| l.contains(":CONSOLE") || l.contains("net::ERR_") || l.contains("Uncaught"))
             .collect();
         assert!(errors.is_empty(), "{} logged errors:\n{}", html.display(), errors.join("\n"));
     }
     let dom = String::from_utf8_lossy(&dom.stdout);
     assert!(dom.contains("Denoising evaluation") && dom.contains("Error against run time"), "{dom}");
     assert!(dom.matches("<img").count() >= 2, "the plots are in the DOM");
+    // Chromium does not log a missing local file: the page must not refer to any.
+    for (i, _) in dom.match_indices(" src=\"") {
+        assert!(
+            dom[i + 6..].starts_with("data:"),
+            "{} loads a file: {}",
+            html.display(),
+            &dom[i..(i + 80).min(dom.len())]
+        );
+    }
+    assert!(!dom.contains("<script"), "the report has no scripts");
 
     let picture = image::open(&screenshot).unwrap_or_else(|e| panic!("{}: {e}", screenshot.display())).to_rgb8();
     let non_white = picture.pixels().filter(|p| p.0.iter().any(|&c| c < 200)).count();
