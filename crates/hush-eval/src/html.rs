@@ -115,7 +115,13 @@ pub fn to_html(report: &Report, dir: &Path) -> Result<String> {
             escape_html(m)
         );
     }
-    h.push_str("</table>\n<ul>");
+    h.push_str("</table>\n");
+    if let Some(t) = report.overview_table() {
+        h.push_str("<p>Over the views:</p>");
+        table(&mut h, &t);
+        h.push_str("<p>Per view:</p>");
+    }
+    h.push_str("<ul>");
     for c in report.tradeoff() {
         let _ = write!(h, "<li>{}</li>", escape_html(&c.sentence()));
     }

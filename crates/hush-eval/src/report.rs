@@ -32,6 +32,11 @@
 //!     "raw_error_same_time": 0.05 | null,      // raw path tracing's error after `seconds`
 //!     "status": "interpolated" | "below_ladder" | "above_ladder" | "no_ladder"
 //!   }],
+//!   "tradeoff_overview": [{       // per (denoiser, spp, metric) over the views
+//!     "method": ..., "spp": 16, "metric": ..., "views": 12, "interpolated": 9,
+//!     "median_time_percent": 30.0 | null, "median_raw_spp": 55.0 | null,
+//!     "median_error_ratio_same_time": 3.1 | null
+//!   }],
 //!   "figures": [{"title": ..., "images": [{"caption": ..., "path": "pictures/....png"}]}]
 //! }
 //! ```
@@ -192,6 +197,7 @@ struct Summary<'a> {
     skipped: &'a [Skipped],
     rows: &'a [Row],
     tradeoff: &'a [Comparison],
+    tradeoff_overview: &'a [tradeoff::Overview],
     figures: &'a [Figure],
 }
 
@@ -257,6 +263,11 @@ impl Report {
             let _ = writeln!(md, "![{} against seconds]({})\n", metric.label(), Self::plot_file(metric));
         }
         md.push_str(&self.legend_markdown());
+        if let Some(table) = self.overview_table() {
+            md.push_str("\nOver the views:\n\n");
+            md.push_str(&table.to_markdown());
+            md.push_str("\nPer view:\n\n");
+        }
         let comparisons = self.tradeoff();
         if comparisons.is_empty() {
             md.push_str("\nNo denoiser to compare with raw path tracing.\n");
@@ -308,6 +319,13 @@ impl Report {
             tables.push((format!("Mean over {} views", views.len()), Table::rows(&means.iter().collect::<Vec<_>>())));
         }
         tables
+    }
+
+    /// The error-against-time comparisons per denoiser, spp and metric over the views (see
+    /// [`tradeoff::overview`]); `None` without a denoiser.
+    pub fn overview_table(&self) -> Option<Table> {
+        let overview = tradeoff::overview(&self.tradeoff());
+        (!overview.is_empty()).then(|| Table::overview(&overview))
     }
 
     /// The rows of one view at one spp in the thesis's table order: the noisy input, then each method.
@@ -363,6 +381,7 @@ impl Report {
     /// `summary.json` (see the module docs for its schema), pretty-printed.
     pub fn to_json(&self) -> String {
         let tradeoff = self.tradeoff();
+        let overview = tradeoff::overview(&tradeoff);
         let summary = Summary {
             schema: SCHEMA,
             conventions: CONVENTIONS,
@@ -370,6 +389,7 @@ impl Report {
             skipped: &self.skipped,
             rows: &self.rows,
             tradeoff: &tradeoff,
+            tradeoff_overview: &overview,
             figures: &self.figures,
         };
         // Only strings and numbers (non-finite numbers become null): this cannot fail.
@@ -450,6 +470,37 @@ impl Table {
                         format!("{:.3e}", r.mse),
                         psnr_text(r.psnr),
                         format!("{:.4}", r.ssim),
+                    ]
+                })
+                .collect(),
+            links: vec![None; rows.len()],
+        }
+    }
+
+    /// Per denoiser, spp and error metric over the views: how often raw path tracing reaches its error and
+    /// the medians of the equal-error and equal-time comparisons.
+    fn overview(rows: &[tradeoff::Overview]) -> Table {
+        Table {
+            header: vec![
+                "method",
+                "spp",
+                "error",
+                "views reached / compared",
+                "median % of raw time",
+                "median raw spp",
+                "median raw error ÷ its error at equal time",
+            ],
+            rows: rows
+                .iter()
+                .map(|o| {
+                    vec![
+                        o.method.clone(),
+                        o.spp.to_string(),
+                        o.metric.label().to_string(),
+                        format!("{} / {}", o.interpolated, o.views),
+                        opt(o.median_time_percent, 1),
+                        opt(o.median_raw_spp, 1),
+                        opt(o.median_error_ratio_same_time, 2),
                     ]
                 })
                 .collect(),

@@ -284,3 +284,59 @@ pub fn to_csv(rows: &[Row]) -> String {
 pub fn csv_field(s: &str) -> String {
     if s.contains([',', '"', '\n', '\r']) { format!("\"{}\"", s.replace('"', "\"\"")) } else { s.to_string() }
 }
+
+/// The comparisons of one denoiser at one spp and one metric, over the views.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Overview {
+    pub method: String,
+    pub spp: u32,
+    pub metric: ErrorMetric,
+    /// How many views were compared.
+    pub views: usize,
+    /// How many of them raw path tracing reaches within its ladder (the medians below are over these).
+    pub interpolated: usize,
+    /// Median of `time_percent` over the interpolated views.
+    pub median_time_percent: Option<f64>,
+    /// Median of `raw_spp` over the interpolated views.
+    pub median_raw_spp: Option<f64>,
+    /// Median over the views with an equal-time error of raw path tracing's error ÷ the denoiser's.
+    pub median_error_ratio_same_time: Option<f64>,
+}
+
+/// Groups `comparisons` by (metric, method, spp), in order of first appearance, with medians over views.
+pub fn overview(comparisons: &[Comparison]) -> Vec<Overview> {
+    let mut keys: Vec<(ErrorMetric, &str, u32)> = Vec::new();
+    for c in comparisons {
+        if !keys.contains(&(c.metric, c.method.as_str(), c.spp)) {
+            keys.push((c.metric, &c.method, c.spp));
+        }
+    }
+    keys.into_iter()
+        .map(|(metric, method, spp)| {
+            let group: Vec<&Comparison> =
+                comparisons.iter().filter(|c| c.metric == metric && c.method == method && c.spp == spp).collect();
+            let median_of = |f: fn(&Comparison) -> Option<f64>| median(group.iter().filter_map(|c| f(c)).collect());
+            Overview {
+                method: method.to_string(),
+                spp,
+                metric,
+                views: group.len(),
+                interpolated: group.iter().filter(|c| c.time_percent.is_some()).count(),
+                median_time_percent: median_of(|c| c.time_percent),
+                median_raw_spp: median_of(|c| c.raw_spp),
+                median_error_ratio_same_time: median_of(|c| Some(c.raw_error_same_time? / c.error)),
+            }
+        })
+        .collect()
+}
+
+/// The median (mean of the middle two for an even count); `None` for no values.
+fn median(mut values: Vec<f64>) -> Option<f64> {
+    values.retain(|v| v.is_finite());
+    if values.is_empty() {
+        return None;
+    }
+    values.sort_by(f64::total_cmp);
+    let n = values.len();
+    Some(if n % 2 == 1 { values[n / 2] } else { 0.5 * (values[n / 2 - 1] + values[n / 2]) })
+}

@@ -100,3 +100,27 @@ fn csv_has_a_line_per_timed_row_and_quotes_names() {
          v,\"run \"\"a\"\", b\",1,0.25,0.5,0.75,0.5,0.25\n"
     );
 }
+
+/// Over views, the medians count only the views raw path tracing reaches; the others are counted as compared.
+#[test]
+fn overview_takes_medians_over_the_views_reached() {
+    let mut rows = Vec::new();
+    // Three views with the same raw ladder; the denoiser at 1 spp (0.5 s) reaches C / 2, C / 4 and C / 100
+    // (8 and 16 spp in 25 % and 12.5 % of the time; the last is below the ladder).
+    for (view, error) in [("a", C / 2.0), ("b", C / 4.0), ("c", C / 100.0)] {
+        for p in raw() {
+            let mut r = row("noisy", p.spp as u32, p.seconds, None, p.error, 0.9);
+            r.view = view.into();
+            rows.push(r);
+        }
+        let mut r = row("net", 1, 0.25, Some(0.25), error, 0.9);
+        r.view = view.into();
+        rows.push(r);
+    }
+    let overview = tradeoff::overview(&tradeoff::compare_to_raw(&rows));
+    let o = overview.iter().find(|o| o.metric == ErrorMetric::RelMse).unwrap();
+    assert_eq!((o.method.as_str(), o.spp, o.views, o.interpolated), ("net", 1, 3, 2));
+    assert!(close(o.median_time_percent.unwrap(), 18.75) && close(o.median_raw_spp.unwrap(), 12.0), "{o:?}");
+    // Equal time (0.5 s): raw has C / 0.5 = 2 C against C / 2, C / 4, C / 100: ratios 4, 8, 200.
+    assert!(close(o.median_error_ratio_same_time.unwrap(), 8.0), "{o:?}");
+}
