@@ -143,7 +143,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
 
-    report.notes.insert(0, format!("Dataset: {} ({} test views).", args.dataset.display(), views.len()));
+    report.notes.insert(0, format!("Dataset: {}; test views: {}.", args.dataset.display(), views.len()));
     report.notes.push(format!(
         "Machine: {}{} logical CPUs{}; denoise time is the median of {} warm runs on {}; render times are those \
          the dataset's manifest recorded on the machine that rendered it.",
