@@ -25,6 +25,9 @@
 //! ```
 
 mod error;
+pub mod external;
+pub mod flip;
+pub mod guided;
 mod metrics;
 mod report;
 mod timing;

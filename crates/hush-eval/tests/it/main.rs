@@ -1,7 +1,11 @@
 //! Integration tests of hush-eval (one binary, modules by topic).
 
+mod external;
+mod flip;
 mod golden;
+mod guided;
 mod metrics;
+mod reference_checks;
 mod report;
 mod timing;
 mod tonemap;
