@@ -1,6 +1,7 @@
 //! `cargo xtask <task>`: orchestration of the `hush` binary. It spawns processes and reads
 //! their JSON; it links neither Candle nor wgpu.
 
+mod baselines;
 mod bench;
 mod demo;
 mod mitsuba;
@@ -18,6 +19,8 @@ tasks:
                              (512², max_depth 8), hush against Mitsuba 3 when it is installed
   bench dataset [--size N] [--views N]
                              perspectives per hour of `hush dataset` (default settings) on the Cornell box
+  baselines setup            install OIDN 2.5.1, BM3D, flip-evaluator, scikit-image (PyPI) into target/baselines-venv
+  baselines check            run BM3D and OIDN through hush-eval on a Cornell box crop; fail unless both help
   mitsuba setup              install Mitsuba 3 (PyPI) into target/mitsuba-venv and verify it renders
   mitsuba references         re-render the references of data/tests/mitsuba with Mitsuba 3";
 
@@ -28,6 +31,7 @@ fn main() -> ExitCode {
         Some("bench") => bench::run(&args[1..]),
         Some("test") => test::run(&args[1..]),
         Some("mitsuba") => mitsuba::run(&args[1..]),
+        Some("baselines") => baselines::run(&args[1..]),
         _ => Err(USAGE.to_string()),
     };
     match result {
