@@ -2,7 +2,8 @@
 //! `pyoidn`), BM3D, flip-evaluator and scikit-image (the versions pinned in
 //! `crates/hush-eval/baselines/requirements.txt`) into a venv under `target/baselines-venv`, and
 //! `cargo xtask baselines check` runs BM3D and OIDN through hush-eval on a 64² crop of the Cornell box and
-//! checks that they lower its error (the test `external::run_for_real_when_installed`, required to run).
+//! checks that they lower its error (the test `external::run_for_real_when_installed`, required to run),
+//! then that hush-eval's `oidn` feature, built against pyoidn's bundled library, reproduces OIDN's outputs.
 
 use std::path::PathBuf;
 use std::process::Command;
@@ -53,18 +54,40 @@ fn setup() -> Result<()> {
     Ok(())
 }
 
-/// Runs BM3D and OIDN for real through hush-eval and fails if either is skipped or does not help.
+/// Runs BM3D and OIDN for real through hush-eval and fails if either is skipped or does not help; then
+/// builds hush-eval's `oidn` feature against pyoidn's bundled library and checks that in-process OIDN
+/// reproduces OIDN 2.5.1's shared outputs.
 fn check() -> Result<()> {
     if !venv_python().is_file() {
         return Err(format!("the baselines are not installed ({} is missing): run `{SETUP}`", venv_python().display()));
     }
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let test = |features: &[&str], filter: &str| {
+        let mut cmd = Command::new(&cargo);
+        cmd.current_dir(project_root()).args(["test", "-p", "hush-eval"]).args(features);
+        cmd.args(["--test", "it", filter, "--", "--nocapture"]);
+        cmd
+    };
     spawn(
-        Command::new(cargo)
-            .current_dir(project_root())
-            .args(["test", "-p", "hush-eval", "--test", "it", "external::run_for_real_when_installed", "--"])
-            .arg("--nocapture")
+        test(&[], "external::run_for_real_when_installed")
             .env("HUSH_REQUIRE_BASELINES", "1")
             .env("HUSH_BASELINES_PYTHON", venv_python()),
+    )?;
+    let oidn_dir = oidn_dir()?;
+    spawn(
+        test(&["--features", "oidn"], "external::oidn_native")
+            .env("LD_LIBRARY_PATH", oidn_dir.join("lib"))
+            .env("OIDN_DIR", &oidn_dir),
     )
+}
+
+/// `<venv>/lib/python3.*/site-packages/pyoidn/oidn`: OIDN's library as bundled by pyoidn.
+fn oidn_dir() -> Result<PathBuf> {
+    let lib = venv_dir().join("lib");
+    let entries = std::fs::read_dir(&lib).map_err(|e| format!("{}: {e}", lib.display()))?;
+    entries
+        .filter_map(|e| e.ok())
+        .map(|e| e.path().join("site-packages/pyoidn/oidn"))
+        .find(|p| p.join("lib").is_dir())
+        .ok_or_else(|| format!("pyoidn's bundled OIDN not found under {}: run `{SETUP}`", lib.display()))
 }

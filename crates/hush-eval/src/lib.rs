@@ -29,6 +29,8 @@ pub mod external;
 pub mod flip;
 pub mod guided;
 mod metrics;
+#[cfg(feature = "oidn")]
+pub mod oidn_native;
 mod report;
 mod timing;
 mod tonemap;

@@ -147,3 +147,24 @@ fn run_for_real_when_installed() {
         }
     }
 }
+
+/// In-process OIDN (feature `oidn`) reproduces OIDN 2.5.1's own output in shared/reference/oidn-2.5.1.
+#[cfg(feature = "oidn")]
+#[test]
+fn oidn_native_reproduces_the_shared_outputs() {
+    use hush_dataset::read_rgb;
+
+    let dir = crate::shared_reference("oidn-2.5.1");
+    let read = |name: &str| read_rgb(dir.join(name)).unwrap();
+    let (color, albedo, normal) = (read("input_color.exr"), read("input_albedo.exr"), read("input_normal.exr"));
+    for (features, want) in [(true, "oidn_rt_hdr_alb_nrm.exr"), (false, "oidn_rt_hdr.exr")] {
+        let (a, n) = if features { (Some(&albedo), Some(&normal)) } else { (None, None) };
+        let (out, seconds) = hush_eval::oidn_native::denoise(&color, a, n, 1).unwrap();
+        let want = read(want);
+        // The same library and weights on the same CPU: the anchors measured bit-identical output; allow
+        // 1e-5 relative for a different SIMD path on another CPU.
+        let worst = out.data.iter().zip(&want.data).map(|(x, y)| (x - y).abs() / (y.abs() + 1e-3)).fold(0.0, f32::max);
+        eprintln!("in-process OIDN ({features}): {seconds:.3} s warm, worst relative difference {worst:e}");
+        assert!(worst < 1e-5, "{worst}");
+    }
+}
