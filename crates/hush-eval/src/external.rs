@@ -140,6 +140,9 @@ pub fn run_baseline(baseline: Baseline, inputs: &[Input], python: &Path, repeats
     for (i, input) in inputs.iter().enumerate() {
         check_input(i, input)?;
     }
+    if inputs.is_empty() {
+        return Ok(Outcome::Done { images: vec![], seconds: vec![], versions: serde_json::Value::Null });
+    }
     if !python.is_file() {
         return Ok(Outcome::Skipped {
             reason: format!(

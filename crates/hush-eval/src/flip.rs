@@ -206,23 +206,19 @@ fn colour_difference(r: &[C3], t: &[C3], w: usize, h: usize, ppd: f32) -> Vec<f3
     let pccmax = GPC * cmax;
     // Horizontal pass: per image, [Y·gY, Cx·gCx, Cz·g₁, Cz·g₂].
     let horizontal = |img: &[C3]| -> Vec<[f32; 4]> {
-        let mut out = vec![[0.0f32; 4]; w * h];
-        for y in 0..h {
-            for x in 0..w {
-                let mut acc = [0.0f32; 4];
-                for i in -half..=half {
-                    let xx = (x as i64 + i).clamp(0, w as i64 - 1) as usize;
-                    let (a, b) = (fy[(i + half) as usize], fz[(i + half) as usize]);
-                    let c = img[y * w + xx];
-                    acc[0] += a[0] * c[0];
-                    acc[1] += a[1] * c[1];
-                    acc[2] += b[0] * c[2];
-                    acc[3] += b[1] * c[2];
-                }
-                out[y * w + x] = acc;
+        per_pixel(w, h, |x, y| {
+            let mut acc = [0.0f32; 4];
+            for i in -half..=half {
+                let xx = (x as i64 + i).clamp(0, w as i64 - 1) as usize;
+                let (a, b) = (fy[(i + half) as usize], fz[(i + half) as usize]);
+                let c = img[y * w + xx];
+                acc[0] += a[0] * c[0];
+                acc[1] += a[1] * c[1];
+                acc[2] += b[0] * c[2];
+                acc[3] += b[1] * c[2];
             }
-        }
-        out
+            acc
+        })
     };
     let (hr, ht) = (horizontal(r), horizontal(t));
     let vertical = |img: &[[f32; 4]], x: usize, y: usize| -> C3 {
@@ -239,15 +235,10 @@ fn colour_difference(r: &[C3], t: &[C3], w: usize, h: usize, ppd: f32) -> Vec<f3
         let rgb = xyz_to_linear_rgb(ycxcz_to_xyz([acc[0], acc[1], acc[2] + acc[3]])).map(|v| v.clamp(0.0, 1.0));
         hunt_lab(xyz_to_lab(linear_rgb_to_xyz(rgb)))
     };
-    let mut out = vec![0.0f32; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            let d = hyab(vertical(&hr, x, y), vertical(&ht, x, y)).powf(GQC);
-            out[y * w + x] =
-                if d < pccmax { d * (GPT / pccmax) } else { GPT + ((d - pccmax) / (cmax - pccmax)) * (1.0 - GPT) };
-        }
-    }
-    out
+    per_pixel(w, h, |x, y| {
+        let d = hyab(vertical(&hr, x, y), vertical(&ht, x, y)).powf(GQC);
+        if d < pccmax { d * (GPT / pccmax) } else { GPT + ((d - pccmax) / (cmax - pccmax)) * (1.0 - GPT) }
+    })
 }
 
 /// Per tap: Gaussian, 1st and 2nd derivative, normalized as in the reference (Gaussian sums to 1, positive
@@ -288,22 +279,18 @@ fn feature_difference(r: &[C3], t: &[C3], w: usize, h: usize, ppd: f32) -> Vec<f
     let half = (filter.len() / 2) as i64;
     // Horizontal pass on normalized luminance: [dx, ddx, gaussian].
     let horizontal = |img: &[C3]| -> Vec<C3> {
-        let mut out = vec![[0.0f32; 3]; w * h];
-        for y in 0..h {
-            for x in 0..w {
-                let mut acc = [0.0f32; 3];
-                for i in -half..=half {
-                    let xx = (x as i64 + i).clamp(0, w as i64 - 1) as usize;
-                    let f = filter[(i + half) as usize];
-                    let v = img[y * w + xx][0] * (1.0 / 116.0) + 16.0 / 116.0;
-                    acc[0] += f[1] * v;
-                    acc[1] += f[2] * v;
-                    acc[2] += f[0] * v;
-                }
-                out[y * w + x] = acc;
+        per_pixel(w, h, |x, y| {
+            let mut acc = [0.0f32; 3];
+            for i in -half..=half {
+                let xx = (x as i64 + i).clamp(0, w as i64 - 1) as usize;
+                let f = filter[(i + half) as usize];
+                let v = img[y * w + xx][0] * (1.0 / 116.0) + 16.0 / 116.0;
+                acc[0] += f[1] * v;
+                acc[1] += f[2] * v;
+                acc[2] += f[0] * v;
             }
-        }
-        out
+            acc
+        })
     };
     let (hr, ht) = (horizontal(r), horizontal(t));
     // Vertical pass: returns (edge, point) magnitudes.
@@ -321,13 +308,27 @@ fn feature_difference(r: &[C3], t: &[C3], w: usize, h: usize, ppd: f32) -> Vec<f
         ((dx * dx + dy * dy).sqrt(), (ddx * ddx + ddy * ddy).sqrt())
     };
     let norm = 1.0 / 2.0f32.sqrt();
-    let mut out = vec![0.0f32; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            let (er, pr) = vertical(&hr, x, y);
-            let (et, pt) = vertical(&ht, x, y);
-            out[y * w + x] = (norm * (er - et).abs().max((pr - pt).abs())).powf(GQF);
+    per_pixel(w, h, |x, y| {
+        let (er, pr) = vertical(&hr, x, y);
+        let (et, pt) = vertical(&ht, x, y);
+        (norm * (er - et).abs().max((pr - pt).abs())).powf(GQF)
+    })
+}
+
+/// `f(x, y)` for every pixel, row-major, with the rows split between the machine's threads.
+fn per_pixel<T: Copy + Default + Send>(w: usize, h: usize, f: impl Fn(usize, usize) -> T + Sync) -> Vec<T> {
+    let mut out = vec![T::default(); w * h];
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).clamp(1, h.max(1));
+    let rows_per = h.div_ceil(threads).max(1);
+    std::thread::scope(|s| {
+        for (chunk, rows) in out.chunks_mut(rows_per * w).enumerate() {
+            let f = &f;
+            s.spawn(move || {
+                for (i, v) in rows.iter_mut().enumerate() {
+                    *v = f(i % w, chunk * rows_per + i / w);
+                }
+            });
         }
-    }
+    });
     out
 }

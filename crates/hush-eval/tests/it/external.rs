@@ -78,6 +78,10 @@ fn missing_venv_or_package_is_skipped_with_the_install_command() {
             Outcome::Done { images, .. } => assert_eq!(images.len(), 1),
         }
     }
+    // Nothing to do is not a skip either.
+    assert!(
+        matches!(run_baseline(Baseline::Bm3d, &[], nowhere, 1).unwrap(), Outcome::Done { images, .. } if images.is_empty())
+    );
     // Bad input is an error, not a skip.
     let mut nan = color.clone();
     nan.pixel_mut(1, 1)[0] = f32::NAN;
