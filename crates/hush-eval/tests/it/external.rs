@@ -67,16 +67,26 @@ fn missing_venv_or_package_is_skipped_with_the_install_command() {
             Outcome::Done { .. } => panic!("ran without a Python"),
         }
     }
-    // A Python without the packages (the system one has neither numpy nor bm3d; if it had both, this would
-    // run BM3D instead, which is checked by `run_for_real_when_installed`).
-    if let Some(python) = system_python() {
-        match run_baseline(Baseline::Bm3d, &inputs, &python, 1).unwrap() {
+    // A Python whose packages are missing: the runner exits with code 3 and names the module.
+    #[cfg(unix)]
+    {
+        let dir = TempDir::new("fake-python");
+        let missing = fake_python(&dir, "missing", "echo '{\"missing\": \"bm3d\"}' > \"$2/result.json\"; exit 3");
+        match run_baseline(Baseline::Bm3d, &inputs, &missing, 1).unwrap() {
             Outcome::Skipped { reason, install } => {
                 assert_eq!(install, INSTALL);
-                assert!(reason.contains("is not installed"), "{reason}");
+                assert!(reason.contains("`bm3d` is not installed"), "{reason}");
             }
-            Outcome::Done { images, .. } => assert_eq!(images.len(), 1),
+            Outcome::Done { .. } => panic!("a missing package was not reported as skipped"),
         }
+        // Any other failure is an error that carries the runner's standard error.
+        let broken = fake_python(&dir, "broken", "echo 'Traceback: out of memory' >&2; exit 1");
+        let err = run_baseline(Baseline::Oidn, &inputs, &broken, 1).unwrap_err().to_string();
+        assert!(err.contains("oidn baseline") && err.contains("out of memory"), "{err}");
+        // A runner that exits 0 without writing its result is an error naming result.json.
+        let silent = fake_python(&dir, "silent", "exit 0");
+        let err = run_baseline(Baseline::Oidn, &inputs, &silent, 1).unwrap_err().to_string();
+        assert!(err.contains("result.json"), "{err}");
     }
     // Nothing to do is not a skip either.
     assert!(
@@ -111,9 +121,14 @@ fn small_inputs() -> (Image, Image, Image) {
     (color, albedo, normal)
 }
 
-fn system_python() -> Option<PathBuf> {
-    let path = std::env::var_os("PATH")?;
-    std::env::split_paths(&path).map(|d| d.join("python3")).find(|p| p.is_file())
+/// An executable shell script standing in for the venv's Python: `$1` is the runner script, `$2` the job dir.
+#[cfg(unix)]
+fn fake_python(dir: &TempDir, name: &str, body: &str) -> PathBuf {
+    use std::os::unix::fs::PermissionsExt;
+    let path = dir.path().join(name);
+    std::fs::write(&path, format!("#!/bin/sh\n{body}\n")).unwrap();
+    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755)).unwrap();
+    path
 }
 
 /// With the venv installed (`cargo xtask baselines setup`), BM3D and OIDN run on a 64² crop of the 16-spp
