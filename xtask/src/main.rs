@@ -3,6 +3,7 @@
 
 mod baselines;
 mod bench;
+mod bench_net;
 mod demo;
 mod mitsuba;
 mod test;
@@ -19,6 +20,10 @@ tasks:
                              (512², max_depth 8), hush against Mitsuba 3 when it is installed
   bench dataset [--size N] [--views N]
                              perspectives per hour of `hush dataset` (default settings) on the Cornell box
+  bench net [--release]      U-Net inference at 512² against official OIDN, a training step's GFLOP/s against
+                             the machine's GEMM rate, peak memory, for 1 and 2 threads
+  bench train [--release] [--steps N]
+                             steps per second and the loader's share of `hush train` (the demo's settings)
   baselines setup            install OIDN 2.5.1, BM3D, flip-evaluator, scikit-image (PyPI) into target/baselines-venv
   baselines check            run BM3D and OIDN through hush-eval on a Cornell box crop; fail unless both help
   mitsuba setup              install Mitsuba 3 (PyPI) into target/mitsuba-venv and verify it renders
