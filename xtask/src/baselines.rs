@@ -25,7 +25,8 @@ fn venv_dir() -> PathBuf {
     target_dir().join("baselines-venv")
 }
 
-fn venv_python() -> PathBuf {
+/// The venv's Python, whether or not it is installed yet.
+pub fn venv_python() -> PathBuf {
     venv_dir().join("bin").join("python")
 }
 
