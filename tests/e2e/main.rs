@@ -221,7 +221,7 @@ fn pipeline_runs_end_to_end() {
     let eval = ["eval", "--dataset", s(&ds), "--model", s(&model), "--out", s(&report), "--timing-runs", "1"];
     let err = expect_error(&[&eval[..], &["--baseline", "noisy,no-such-filter"]].concat());
     assert!(err.contains("unknown baseline 'no-such-filter'") && err.contains("noisy ("), "{err}");
-    expect_success(&[&eval[..], &["--baseline", "noisy"]].concat());
+    expect_success(&[&eval[..], &["--baseline", "noisy", "--baseline", "guided"]].concat());
     check_eval_report(&report);
 }
 
@@ -234,26 +234,28 @@ fn check_eval_report(report: &Path) {
     assert_eq!(summary["schema"], 2);
     let rows = summary["rows"].as_array().unwrap();
     let methods: Vec<&str> = rows.iter().map(|r| r["method"].as_str().unwrap()).collect();
-    assert_eq!(methods, ["reference", "noisy", "run/model", "noisy", "run/model"]);
+    assert_eq!(methods, ["reference", "noisy", "run/model", "guided", "noisy", "run/model", "guided"]);
     for r in rows {
         assert!(r["render_seconds"].as_f64().is_some_and(|t| t > 0.0), "{r}");
-        assert_eq!(r["denoise_seconds"].is_null(), r["method"] != "run/model", "{r}");
-        assert!(r["ms_ssim"].is_null() && r["flip"].is_null(), "32 px is too small for MS-SSIM: {r}");
+        let denoiser = r["method"] == "run/model" || r["method"] == "guided";
+        assert_eq!(r["denoise_seconds"].is_null(), !denoiser, "{r}");
+        assert!(r["ms_ssim"].is_null(), "32 px is too small for MS-SSIM: {r}");
+        assert!(r["flip"].as_f64().is_some_and(|f| (0.0..=1.0).contains(&f)), "{r}");
     }
     let tradeoff = summary["tradeoff"].as_array().unwrap();
-    assert_eq!(tradeoff.len(), 4, "the model at 1 and 2 spp, for relMSE and 1 - SSIM: {tradeoff:?}");
-    assert!(tradeoff.iter().all(|c| c["method"] == "run/model" && c["seconds"].as_f64().is_some()));
+    assert_eq!(tradeoff.len(), 8, "model and filter at 1 and 2 spp, for relMSE and 1 - SSIM: {tradeoff:?}");
+    assert!(tradeoff.iter().all(|c| c["method"] != "noisy" && c["seconds"].as_f64().is_some()));
 
     let csv = std::fs::read_to_string(report.join("error_vs_time.csv")).unwrap();
     let lines: Vec<&str> = csv.lines().collect();
     assert_eq!(lines[0], "view,method,spp,render_seconds,denoise_seconds,seconds,rel_mse,one_minus_ssim");
-    assert_eq!(lines.len(), 5, "noisy and the model at 1 and 2 spp:\n{csv}");
+    assert_eq!(lines.len(), 7, "noisy, the model and the filter at 1 and 2 spp:\n{csv}");
     for plot in ["error_vs_time_rel_mse.png", "error_vs_time_one_minus_ssim.png"] {
         let png = image::open(report.join(plot)).unwrap().to_rgb8();
         assert!(png.pixels().any(|p| p.0 == [0, 0, 0]), "{plot} draws the noisy curve in black");
     }
     let pictures = report.join("pictures");
-    for kind in ["noisy_crop", "run-model_crop", "reference_crop", "noisy_diff", "run-model_diff"] {
+    for kind in ["noisy_crop", "run-model_crop", "guided_crop", "reference_crop", "noisy_diff", "guided_diff"] {
         let file = pictures.join(format!("cbox_v001_000001_{kind}.png"));
         assert!(file.is_file(), "{} is missing", file.display());
     }
@@ -264,7 +266,7 @@ fn check_eval_report(report: &Path) {
     let html = std::fs::read_to_string(report.join("report.html")).unwrap();
     assert!(html.starts_with("<!DOCTYPE html>") && html.trim_end().ends_with("</html>"));
     let images = html.matches("<img ").count();
-    assert_eq!(images, 2 + 3 + 2, "two plots, three crops, two difference pictures");
+    assert_eq!(images, 2 + 4 + 3, "two plots, four crops, three difference pictures");
     assert_eq!(html.matches("src=\"data:image/png;base64,").count(), images, "every image is inline");
 }
 

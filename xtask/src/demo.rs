@@ -42,18 +42,18 @@ pub fn render_dataset(hush: &Path, paths: &DemoPaths) -> Result<()> {
     )
 }
 
-/// Trains the demo model on the demo dataset.
+/// `hush train` with the demo's settings; `cargo xtask bench train` measures the same.
+pub fn train_command(hush: &Path, dataset: &Path, run: &Path, steps: u32) -> Command {
+    let mut cmd = Command::new(hush);
+    cmd.arg("train").arg("--dataset").arg(dataset).arg("--out").arg(run);
+    cmd.args(["--features", "color,albedo,normal", "--spp", "4,16", "--batch", "4", "--crop", "64"]);
+    cmd.args(["--width", "0.25", "--lr", "1e-3", "--loss", "mix", "--seed", "1", "--steps", &steps.to_string()]);
+    cmd
+}
+
+/// Trains the demo model (1000 steps) on the demo dataset.
 pub fn train(hush: &Path, paths: &DemoPaths) -> Result<()> {
-    spawn(
-        Command::new(hush)
-            .arg("train")
-            .arg("--dataset")
-            .arg(&paths.dataset)
-            .arg("--out")
-            .arg(&paths.run_dir)
-            .args(["--features", "color,albedo,normal", "--spp", "4,16", "--steps", "1000"])
-            .args(["--batch", "4", "--crop", "64", "--width", "0.25", "--lr", "1e-3", "--loss", "mix", "--seed", "1"]),
-    )
+    spawn(&mut train_command(hush, &paths.dataset, &paths.run_dir, 1000))
 }
 
 pub fn run(args: &[String]) -> Result<()> {

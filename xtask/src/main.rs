@@ -1,7 +1,9 @@
 //! `cargo xtask <task>`: orchestration of the `hush` binary. It spawns processes and reads
 //! their JSON; it links neither Candle nor wgpu.
 
+mod baselines;
 mod bench;
+mod bench_net;
 mod demo;
 mod eval;
 mod mitsuba;
@@ -23,6 +25,12 @@ tasks:
                              (512², max_depth 8), hush against Mitsuba 3 when it is installed
   bench dataset [--size N] [--views N]
                              perspectives per hour of `hush dataset` (default settings) on the Cornell box
+  bench net [--release]      U-Net inference at 512² against official OIDN, a training step's GFLOP/s against
+                             the machine's GEMM rate, peak memory, for 1 and 2 threads
+  bench train [--release] [--steps N]
+                             steps per second and the loader's share of `hush train` (the demo's settings)
+  baselines setup            install OIDN 2.5.1, BM3D, flip-evaluator, scikit-image (PyPI) into target/baselines-venv
+  baselines check            run BM3D and OIDN through hush-eval on a Cornell box crop; fail unless both help
   mitsuba setup              install Mitsuba 3 (PyPI) into target/mitsuba-venv and verify it renders
   mitsuba references         re-render the references of data/tests/mitsuba with Mitsuba 3";
 
@@ -34,6 +42,7 @@ fn main() -> ExitCode {
         Some("eval") => eval::run(&args[1..]),
         Some("test") => test::run(&args[1..]),
         Some("mitsuba") => mitsuba::run(&args[1..]),
+        Some("baselines") => baselines::run(&args[1..]),
         _ => Err(USAGE.to_string()),
     };
     match result {

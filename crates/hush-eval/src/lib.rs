@@ -25,8 +25,13 @@
 //! ```
 
 mod error;
+pub mod external;
+pub mod flip;
+pub mod guided;
 pub mod html;
 mod metrics;
+#[cfg(feature = "oidn")]
+pub mod oidn_native;
 pub mod pictures;
 mod plot;
 mod report;

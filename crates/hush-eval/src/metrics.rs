@@ -29,8 +29,8 @@ pub struct Metrics {
     /// MS-SSIM on tonemapped images (hush-net's MS-SSIM, 5 scales); `None` when the image is too small for
     /// 5 scales (a side below [`MS_SSIM_MIN_SIDE`]), rather than a value on fewer scales that is not comparable.
     pub ms_ssim: Option<f64>,
-    /// FLIP (LDR, on the tonemapped images). Not computed yet: always `None` until hush-eval has a FLIP
-    /// implementation; it is never estimated or faked.
+    /// Mean LDR-FLIP of the tonemapped images ([`crate::flip::flip`] at its default pixels per degree);
+    /// `Option` so that rows written before FLIP existed still read.
     pub flip: Option<f64>,
     /// The exposure both images were tonemapped with (from the reference).
     pub exposure: f32,
@@ -49,7 +49,7 @@ pub fn compare(test: &Image, reference: &Image) -> Result<Metrics> {
         mse,
         rel_mse: mean_by(test, reference, rel_se),
         ms_ssim: ms_ssim_tonemapped(&t, &r)?,
-        flip: None,
+        flip: Some(crate::flip::flip(&t, &r)?.mean),
         exposure,
     })
 }

@@ -18,7 +18,7 @@
 //!     "ssim": 0.93, "ms_ssim": 0.97 | null,   // null: a side below 176 px (MS-SSIM needs 5 scales)
 //!     "mae": 0.01, "mse": 1e-4,  // on tonemapped images
 //!     "rel_mse": 0.02,           // on linear HDR images
-//!     "flip": null,              // not computed yet
+//!     "flip": 0.12,              // mean LDR-FLIP on the tonemapped images (null in rows of old reports)
 //!     "render_seconds": 1.5 | null,   // rendering the noisy input at this spp (from the manifest)
 //!     "denoise_seconds": 0.3 | null,  // warm median; null for noisy and reference
 //!     "preview": "previews/....png" | null
@@ -66,7 +66,8 @@ sigma 1.5, valid region, K1 0.01, K2 0.03, data range 1, mean over pixels and ch
 training loss). MS-SSIM: 5 scales with Wang's weights; it is left empty for images with a side below 176 px, \
 which do not fit 5 scales. MAE and MSE are means over pixels and channels in [0, 1] (the thesis's tables used \
 another scale). relMSE is computed on the linear HDR images: mean of (x - ref)^2 / (ref^2 + 0.01). \
-FLIP is not computed yet (empty). Seconds: render seconds are the wall-clock time of rendering the noisy input \
+FLIP is LDR-FLIP (a port of NVIDIA's reference, flip-evaluator 1.7) on the same tonemapped images at 67 \
+pixels per degree, the mean of its error map. Seconds: render seconds are the wall-clock time of rendering the noisy input \
 at its spp, from the dataset's manifest; denoise seconds are the median wall-clock time of warm runs \
 (empty for the noisy input). A denoiser's cost in the error-against-time comparison is render + denoise seconds \
 at its input spp; raw path tracing's curve is the noisy images along the spp ladder, interpolated linearly in \
@@ -91,7 +92,7 @@ pub struct Row {
     pub mae: f64,
     pub mse: f64,
     pub rel_mse: f64,
-    /// Not computed yet: always `None`.
+    /// Mean LDR-FLIP on the tonemapped images.
     #[serde(default)]
     pub flip: Option<f64>,
     /// Seconds to render the noisy input at `spp` (the reference's for `reference`), from the manifest.

@@ -2,6 +2,7 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
 
+pub use crate::bench_cmd::BenchArgs;
 pub use crate::dataset_cmd::DatasetArgs;
 pub use crate::train_cmd::TrainArgs;
 
@@ -30,6 +31,9 @@ pub enum Command {
     /// Evaluate models and baselines against the noisy input on a dataset's test split: metrics, error
     /// against run time, pictures and a report.
     Eval(EvalArgs),
+    /// Measurements behind `cargo xtask bench net` (JSON on stdout).
+    #[command(hide = true)]
+    Bench(BenchArgs),
 }
 
 /// Camera and image overrides shared by `render` and `dataset`.

@@ -9,6 +9,8 @@ use std::path::Path;
 
 use anyhow::{Context, Result, bail};
 use hush_dataset::{Image, Manifest, Split, ViewImages, load_view, write_atomic, write_png_preview};
+use hush_eval::external;
+use hush_eval::guided::{GuidedParams, guided_filter};
 use hush_eval::pictures::{self, Rgb8};
 use hush_eval::{Figure, FigureImage, NOISY, REFERENCE, Report, Row, Skipped, compare, exposure_of, time_median};
 
@@ -20,8 +22,55 @@ trait Method {
     /// The name in the report.
     fn name(&self) -> &str;
     /// The test image for `images.color`, and the median seconds of `timing_runs` warm denoising runs
-    /// (`None` when nothing is denoised).
-    fn run(&self, images: &ViewImages, timing_runs: usize) -> Result<(Image, Option<f64>)>;
+    /// (`None` when nothing is denoised); or why the method cannot run here.
+    fn run(&self, images: &ViewImages, timing_runs: usize) -> Result<Run>;
+}
+
+/// What a [`Method`] made of one view.
+enum Run {
+    Done(Image, Option<f64>),
+    /// The method cannot run on this machine (e.g. a Python package is missing): reported once, skipped after.
+    Skipped(Skipped),
+}
+
+/// The hand-coded baseline: hush-eval's albedo- and normal-guided cross-bilateral filter.
+struct Guided;
+
+impl Method for Guided {
+    fn name(&self) -> &str {
+        "guided"
+    }
+
+    fn run(&self, images: &ViewImages, timing_runs: usize) -> Result<Run> {
+        let params = GuidedParams::default();
+        let filter = || Ok(guided_filter(&images.color, Some(&images.albedo), Some(&images.normal), &params)?);
+        let (image, seconds) = timed(timing_runs, filter)?;
+        Ok(Run::Done(image, Some(seconds)))
+    }
+}
+
+/// BM3D or official OIDN 2.5.1 in the baselines' Python venv (`cargo xtask baselines setup`); the runner
+/// measures its own warm median seconds.
+struct External(external::Baseline);
+
+impl Method for External {
+    fn name(&self) -> &str {
+        self.0.name()
+    }
+
+    fn run(&self, images: &ViewImages, timing_runs: usize) -> Result<Run> {
+        let input =
+            external::Input { color: &images.color, albedo: Some(&images.albedo), normal: Some(&images.normal) };
+        match external::run_baseline(self.0, &[input], &external::venv_python(), timing_runs.max(1))? {
+            external::Outcome::Done { mut images, seconds, .. } => match (images.pop(), seconds.first()) {
+                (Some(image), Some(&s)) => Ok(Run::Done(image, Some(s))),
+                _ => bail!("{} returned no image", self.0.name()),
+            },
+            external::Outcome::Skipped { reason, install } => {
+                Ok(Run::Skipped(Skipped { method: self.0.name().into(), reason, install: Some(install.into()) }))
+            }
+        }
+    }
 }
 
 /// Raw path tracing: the noisy input as it is.
@@ -32,8 +81,8 @@ impl Method for Noisy {
         NOISY
     }
 
-    fn run(&self, images: &ViewImages, _: usize) -> Result<(Image, Option<f64>)> {
-        Ok((images.color.clone(), None))
+    fn run(&self, images: &ViewImages, _: usize) -> Result<Run> {
+        Ok(Run::Done(images.color.clone(), None))
     }
 }
 
@@ -48,10 +97,10 @@ impl Method for Model {
         &self.name
     }
 
-    fn run(&self, images: &ViewImages, timing_runs: usize) -> Result<(Image, Option<f64>)> {
+    fn run(&self, images: &ViewImages, timing_runs: usize) -> Result<Run> {
         let aux: Vec<&Image> = self.denoiser.features().iter().map(|&f| aux_of(images, f)).collect();
         let (image, seconds) = timed(timing_runs, || self.denoiser.denoise(&images.color, &aux))?;
-        Ok((image, Some(seconds)))
+        Ok(Run::Done(image, Some(seconds)))
     }
 }
 
@@ -72,30 +121,26 @@ fn timed(runs: usize, denoise: impl Fn() -> Result<Image>) -> Result<(Image, f64
 }
 
 /// The names `--baseline` accepts, with what they are (`all` asks for every one).
-pub const BASELINES: &[(&str, &str)] = &[(NOISY, "the noisy input (raw path tracing); always evaluated")];
+pub const BASELINES: &[(&str, &str)] = &[
+    (NOISY, "the noisy input (raw path tracing); always evaluated"),
+    ("guided", "hush's hand-coded cross-bilateral filter guided by albedo and normal"),
+    ("oidn", "official Open Image Denoise 2.5.1 (Python venv of `cargo xtask baselines setup`)"),
+    ("bm3d", "BM3D on the tonemapped image (Python venv of `cargo xtask baselines setup`)"),
+];
 
-/// A baseline asked for by name: ready to run, or skipped with the reason and the command that installs it.
-// Only `noisy` exists yet, and it is always evaluated; the hand-coded and external baselines construct these.
-#[allow(dead_code)]
-enum Baseline {
-    Ready(Box<dyn Method>),
-    Skipped(Skipped),
-}
-
-/// The baseline called `name`; `None` for `noisy`, which is always evaluated.
-///
-/// A new baseline is a name in [`BASELINES`] and an arm here. An in-process filter is a `Method` whose `run`
-/// wraps its call in [`timed`] (e.g. `timed(runs, || Ok(guided::denoise(&images.color, &images.albedo,
-/// &images.normal)?))`); an external one that measures its own seconds returns them directly; one that is
-/// not installed returns `Baseline::Skipped` with the reason and the install command.
-fn baseline(name: &str) -> Result<Option<Baseline>> {
-    match name {
-        NOISY => Ok(None),
+/// The baseline called `name`; `None` for `noisy`, which is always evaluated. A new baseline is a name in
+/// [`BASELINES`], a [`Method`] and an arm here; one that cannot run returns [`Run::Skipped`].
+fn baseline(name: &str) -> Result<Option<Box<dyn Method>>> {
+    Ok(Some(match name {
+        NOISY => return Ok(None),
+        "guided" => Box::new(Guided),
+        "oidn" => Box::new(External(external::Baseline::Oidn)),
+        "bm3d" => Box::new(External(external::Baseline::Bm3d)),
         _ => {
             let known: Vec<String> = BASELINES.iter().map(|(n, what)| format!("{n} ({what})")).collect();
             bail!("unknown baseline '{name}': known baselines are {} (`all` asks for every one)", known.join(", "))
         }
-    }
+    }))
 }
 
 /// A method name for a model file: `<run folder>/<file stem>`.
@@ -126,10 +171,8 @@ pub fn run(args: EvalArgs) -> Result<()> {
     let all: Vec<String> = BASELINES.iter().map(|(name, _)| name.to_string()).collect();
     let baselines = if args.baselines.iter().any(|b| b == "all") { &all } else { &args.baselines };
     for name in baselines {
-        match baseline(name)? {
-            None => {}
-            Some(Baseline::Ready(method)) => methods.push(method),
-            Some(Baseline::Skipped(skipped)) => report.skipped.push(skipped),
+        if let Some(method) = baseline(name)? {
+            methods.push(method);
         }
     }
     for (i, m) in methods.iter().enumerate() {
@@ -181,9 +224,20 @@ pub fn run(args: EvalArgs) -> Result<()> {
             let render_seconds = view.noisy_at(spp).map(|r| r.render_seconds);
             let mut outputs: Vec<(String, Image)> = Vec::new();
             for method in &methods {
-                let (image, denoise_seconds) = method
+                if report.skipped.iter().any(|k| k.method == method.name()) {
+                    continue;
+                }
+                let run = method
                     .run(&images, args.timing_runs)
                     .with_context(|| format!("{} on {name} at {spp} spp", method.name()))?;
+                let (image, denoise_seconds) = match run {
+                    Run::Done(image, seconds) => (image, seconds),
+                    Run::Skipped(skipped) => {
+                        eprintln!("{}: skipped: {}", skipped.method, skipped.reason);
+                        report.skipped.push(skipped);
+                        continue;
+                    }
+                };
                 let mut row = Row::new(&name, method.name(), spp, &compare(&image, &images.reference)?);
                 row.render_seconds = render_seconds;
                 row.denoise_seconds = denoise_seconds;
