@@ -19,6 +19,7 @@ mod gpu;
 #[cfg(test)]
 mod probe;
 mod render;
+mod rough;
 mod upload;
 
 pub use gpu::{GpuContext, INSTALL_HINT};

@@ -9,7 +9,7 @@ use crate::upload::{GpuLight, GpuMaterial, GpuNode, GpuNormals, GpuTri, flatten}
 use crate::{GpuContext, TraceError};
 
 /// The WGSL source of the path-tracing kernel (validated by a test with naga).
-pub const KERNEL_SOURCE: &str = concat!(include_str!("bsdf.wgsl"), include_str!("path.wgsl"));
+pub const KERNEL_SOURCE: &str = concat!(include_str!("bsdf.wgsl"), include_str!("env.wgsl"), include_str!("path.wgsl"));
 
 /// Floats per pixel in the accumulation buffer; mirrors `ACCUM_STRIDE` in the kernel.
 const ACCUM_STRIDE: usize = 19;
@@ -123,7 +123,7 @@ impl<'a> Renderer<'a> {
         scene.camera.validate().map_err(TraceError::Invalid)?;
         let pixels = w as u64 * h as u64;
         let accum_bytes = pixels * (ACCUM_STRIDE * 4) as u64;
-        let limit = self.gpu.device.limits().max_storage_buffer_binding_size as u64;
+        let limit = self.gpu.device.limits().max_storage_buffer_binding_size;
         if accum_bytes > limit {
             return Err(TraceError::Invalid(format!(
                 "{w}×{h} needs {accum_bytes} bytes of accumulation buffer; this device allows {limit}: render a smaller image"
@@ -152,6 +152,19 @@ impl<'a> Renderer<'a> {
         let materials = storage("materials", bytemuck::cast_slice::<GpuMaterial, u8>(&flat.materials));
         let lights = storage("lights", bytemuck::cast_slice::<GpuLight, u8>(&flat.lights));
         let nodes = storage("bvh", bytemuck::cast_slice::<GpuNode, u8>(&flat.nodes));
+        let aux_bytes = flat.aux.len() as u64 * 4;
+        if aux_bytes > limit {
+            return Err(TraceError::Invalid(format!(
+                "the scene's textures and tables take {aux_bytes} bytes; this device binds at most {limit}: \
+                 use smaller textures"
+            )));
+        }
+        let aux = storage("aux", bytemuck::cast_slice::<f32, u8>(&flat.aux));
+        let env = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("env"),
+            contents: bytemuck::bytes_of(&flat.env.uniform()),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
         let accum = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("accum"),
             size: accum_bytes,
@@ -182,6 +195,8 @@ impl<'a> Renderer<'a> {
                 wgpu::BindGroupEntry { binding: 4, resource: lights.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 5, resource: accum.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 6, resource: nodes.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 7, resource: aux.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 8, resource: env.as_entire_binding() },
             ],
         });
 
