@@ -17,6 +17,12 @@ const FLAG_NONLINEAR: u32 = 2u;
 // Rough lobes use the Beckmann distribution instead of GGX.
 const FLAG_BECKMANN: u32 = 4u;
 
+// Specialization (pipeline-overridable constants, set per scene by render.rs): false removes
+// the code of a feature the scene does not use. The defaults give the generic kernel.
+override HAS_ROUGH_DIELECTRIC: bool = true;
+override HAS_ROUGH_PLASTIC: bool = true;
+override HAS_BECKMANN: bool = true;
+
 // One material, as flattened by upload.rs.
 //   a: rgb = diffuse reflectance (diffuse, plastic) or specular reflectance (conductor,
 //      dielectric); w = microfacet alpha (0: smooth)
@@ -120,7 +126,7 @@ fn fresnel_conductor(cos_i_in: f32, eta: vec3<f32>, k: vec3<f32>) -> vec3<f32> {
 // ---- microfacet distributions (isotropic GGX and Beckmann, Mitsuba's formulas) ----
 
 fn mf_beckmann(m: Material) -> bool {
-    return (mat_flags(m) & FLAG_BECKMANN) != 0u;
+    return HAS_BECKMANN && (mat_flags(m) & FLAG_BECKMANN) != 0u;
 }
 
 fn mf_d(m: vec3<f32>, alpha: f32, beckmann: bool) -> f32 {
@@ -466,7 +472,7 @@ fn front_frame(m: Material, wo: vec3<f32>, wi: vec3<f32>) -> mat2x3<f32> {
 // f·|cos θi| of the non-delta lobes.
 fn bsdf_eval(m: Material, wo_in: vec3<f32>, wi_in: vec3<f32>) -> vec3<f32> {
     let kind = mat_kind(m);
-    if kind == KIND_DIELECTRIC && m.a.w > 0.0 {
+    if HAS_ROUGH_DIELECTRIC && kind == KIND_DIELECTRIC && m.a.w > 0.0 {
         return rough_dielectric_eval(m, wo_in, wi_in);
     }
     if kind == KIND_DIELECTRIC || kind == KIND_THIN_DIELECTRIC {
@@ -492,7 +498,7 @@ fn bsdf_eval(m: Material, wo_in: vec3<f32>, wi_in: vec3<f32>) -> vec3<f32> {
         let fr = fresnel_conductor(dot(wo, h), m.c.xyz, m.d.xyz) * m.a.xyz;
         return fr * mf_d(h, alpha, bk) * g / (4.0 * wo.z);
     }
-    if m.a.w > 0.0 {
+    if HAS_ROUGH_PLASTIC && m.a.w > 0.0 {
         return rough_plastic_eval(m, wo, wi);
     }
     // Plastic: only the diffuse base is non-delta.
@@ -502,7 +508,7 @@ fn bsdf_eval(m: Material, wo_in: vec3<f32>, wi_in: vec3<f32>) -> vec3<f32> {
 // Solid-angle density with which bsdf_sample produces wi through a non-delta lobe.
 fn bsdf_pdf(m: Material, wo_in: vec3<f32>, wi_in: vec3<f32>) -> f32 {
     let kind = mat_kind(m);
-    if kind == KIND_DIELECTRIC && m.a.w > 0.0 {
+    if HAS_ROUGH_DIELECTRIC && kind == KIND_DIELECTRIC && m.a.w > 0.0 {
         return rough_dielectric_pdf(m, wo_in, wi_in);
     }
     if kind == KIND_DIELECTRIC || kind == KIND_THIN_DIELECTRIC {
@@ -525,7 +531,7 @@ fn bsdf_pdf(m: Material, wo_in: vec3<f32>, wi_in: vec3<f32>) -> f32 {
         let h = normalize(wo + wi);
         return mf_pdf_visible(wo, h, alpha, mf_beckmann(m)) / (4.0 * dot(wo, h));
     }
-    if m.a.w > 0.0 {
+    if HAS_ROUGH_PLASTIC && m.a.w > 0.0 {
         return rough_plastic_pdf(m, wo, wi);
     }
     let f_o = fresnel_dielectric(wo.z, m.b.w).r;
@@ -537,7 +543,7 @@ fn bsdf_pdf(m: Material, wo_in: vec3<f32>, wi_in: vec3<f32>) -> f32 {
 // Samples wi given wo; `u` drives the direction, `u_lobe` the choice between lobes.
 fn bsdf_sample(m: Material, wo_in: vec3<f32>, u: vec2<f32>, u_lobe: f32) -> BsdfSample {
     let kind = mat_kind(m);
-    if kind == KIND_DIELECTRIC && m.a.w > 0.0 {
+    if HAS_ROUGH_DIELECTRIC && kind == KIND_DIELECTRIC && m.a.w > 0.0 {
         return rough_dielectric_sample(m, wo_in, u, u_lobe);
     }
     if kind == KIND_DIELECTRIC {
@@ -585,7 +591,7 @@ fn bsdf_sample(m: Material, wo_in: vec3<f32>, u: vec2<f32>, u_lobe: f32) -> Bsdf
                 s = BsdfSample(wi, fr * mf_g1(wi, h, alpha, bk), pdf, false, pdf > 0.0);
             }
         }
-    } else if m.a.w > 0.0 {
+    } else if HAS_ROUGH_PLASTIC && m.a.w > 0.0 {
         s = rough_plastic_sample(m, wo, u, u_lobe);
     } else {
         // Plastic: the specular coat with probability ∝ its Fresnel reflectance × sampling weight.

@@ -65,6 +65,10 @@ const RR_DEPTH: u32 = 5u;
 const ACCUM_STRIDE: u32 = 19u;
 const T_MAX: f32 = 3.0e38;
 
+// Specialization (see bsdf.wgsl): textures and the environment.
+override HAS_TEXTURES: bool = true;
+override HAS_ENV: bool = true;
+
 // ---- random numbers: PCG hash (Jarzynski & Olano 2020) ----
 
 var<private> rng_state: u32;
@@ -292,7 +296,7 @@ fn trace(pixel: vec2<u32>) -> Sample {
         let hit = intersect(o, d, T_MAX);
         if hit.tri == NO_HIT {
             // The environment, weighted against sampling it.
-            if env.kind != ENV_NONE {
+            if HAS_ENV && env.kind != ENV_NONE {
                 var weight = 1.0;
                 if !prev_delta {
                     weight = power_heuristic(prev_pdf, env.radiance.w * env_pdf(d));
@@ -317,7 +321,7 @@ fn trace(pixel: vec2<u32>) -> Sample {
         }
         var mat = materials[bitcast<u32>(tri.p0.w)];
         let tex = bitcast<u32>(mat.e.x);
-        if tex != NO_TEXTURE {
+        if HAS_TEXTURES && tex != NO_TEXTURE {
             let w = 1.0 - hit.u - hit.v;
             let uv = w * nr.uv01.xy + hit.u * nr.uv01.zw + hit.v * nr.uv2.xy;
             mat.a = vec4<f32>(texture_lookup(tex, uv), mat.a.w);
@@ -354,7 +358,7 @@ fn trace(pixel: vec2<u32>) -> Sample {
 
         // Next-event estimation: the environment with probability env_radiance.w, otherwise
         // a point on a triangle light picked by power.
-        let env_pick = env.radiance.w;
+        let env_pick = select(0.0, env.radiance.w, HAS_ENV);
         if (params.light_count > 0u || env_pick > 0.0) && !delta {
             var wi = vec3<f32>(0.0);
             var light_pdf = 0.0;

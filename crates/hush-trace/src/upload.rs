@@ -367,6 +367,59 @@ pub(crate) struct GpuScene {
     pub lights: Vec<GpuLight>,
     pub aux: Vec<f32>,
     pub env: GpuEnv,
+    pub features: KernelFeatures,
+}
+
+/// What of the kernel a scene uses; the renderer compiles the rest out.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct KernelFeatures {
+    pub textures: bool,
+    pub environment: bool,
+    pub rough_dielectric: bool,
+    pub rough_plastic: bool,
+    pub beckmann: bool,
+}
+
+impl KernelFeatures {
+    /// The generic kernel.
+    pub const ALL: KernelFeatures = KernelFeatures {
+        textures: true,
+        environment: true,
+        rough_dielectric: true,
+        rough_plastic: true,
+        beckmann: true,
+    };
+    /// None of the optional features (diffuse, smooth and GGX-rough conductors, smooth and
+    /// thin glass, smooth plastic, triangle lights remain).
+    pub const NONE: KernelFeatures = KernelFeatures {
+        textures: false,
+        environment: false,
+        rough_dielectric: false,
+        rough_plastic: false,
+        beckmann: false,
+    };
+
+    /// The features `scene` uses.
+    pub fn of(scene: &Scene) -> KernelFeatures {
+        let mut f = KernelFeatures { environment: scene.environment.is_some(), ..KernelFeatures::NONE };
+        for m in scene.meshes.iter().map(|m| &m.material) {
+            f.textures |= m.texture().is_some();
+            let (alpha, distribution) = match *m {
+                Material::Conductor { alpha, distribution, .. } => (alpha, distribution),
+                Material::Dielectric { alpha, distribution, thin: false, .. } => {
+                    f.rough_dielectric |= alpha > 0.0;
+                    (alpha, distribution)
+                }
+                Material::Plastic { alpha, distribution, .. } => {
+                    f.rough_plastic |= alpha > 0.0;
+                    (alpha, distribution)
+                }
+                _ => continue,
+            };
+            f.beckmann |= alpha > 0.0 && distribution == Microfacet::Beckmann;
+        }
+        f
+    }
 }
 
 fn v4(v: Vec3, w: f32) -> [f32; 4] {
@@ -455,5 +508,5 @@ pub(crate) fn flatten(scene: &Scene) -> Result<GpuScene, TraceError> {
     }
     let nodes = bvh.nodes.into_iter().map(GpuNode::from).collect();
     let env = environment(scene.environment.as_ref(), &mut aux, !lights.is_empty())?;
-    Ok(GpuScene { nodes, tris, normals, materials, lights, aux: aux.data, env })
+    Ok(GpuScene { nodes, tris, normals, materials, lights, aux: aux.data, env, features: KernelFeatures::of(scene) })
 }
