@@ -83,6 +83,10 @@ pub struct RenderArgs {
     /// Write timing statistics (paths, wall and CPU seconds, adapter) as JSON.
     #[arg(long)]
     pub stats: Option<PathBuf>,
+    /// Render with the generic kernel instead of one specialized to the scene (same image;
+    /// for speed comparisons).
+    #[arg(long)]
+    pub generic: bool,
 }
 
 #[derive(Args, Debug)]
