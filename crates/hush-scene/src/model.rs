@@ -194,33 +194,14 @@ impl Material {
     }
 
     /// The same material made two-sided (Mitsuba's `twosided` wrapper).
-    pub fn with_two_sided(self, two: bool) -> Material {
-        match self {
-            Material::Diffuse { reflectance, .. } => Material::Diffuse { reflectance, two_sided: two },
-            Material::Conductor { alpha, distribution, ior, specular_reflectance, .. } => {
-                Material::Conductor { alpha, distribution, ior, specular_reflectance, two_sided: two }
-            }
-            Material::Plastic {
-                diffuse_reflectance,
-                specular_reflectance,
-                alpha,
-                distribution,
-                int_ior,
-                ext_ior,
-                nonlinear,
-                ..
-            } => Material::Plastic {
-                diffuse_reflectance,
-                specular_reflectance,
-                alpha,
-                distribution,
-                int_ior,
-                ext_ior,
-                nonlinear,
-                two_sided: two,
-            },
-            d @ Material::Dielectric { .. } => d,
+    pub fn with_two_sided(mut self, two: bool) -> Material {
+        match &mut self {
+            Material::Diffuse { two_sided, .. }
+            | Material::Conductor { two_sided, .. }
+            | Material::Plastic { two_sided, .. } => *two_sided = two,
+            Material::Dielectric { .. } => {}
         }
+        self
     }
 
     /// The texture this material reads, if any.
