@@ -4,6 +4,7 @@
 mod bench;
 mod demo;
 mod mitsuba;
+mod sweep;
 mod test;
 mod util;
 
@@ -19,7 +20,8 @@ tasks:
   bench dataset [--size N] [--views N]
                              perspectives per hour of `hush dataset` (default settings) on the Cornell box
   mitsuba setup              install Mitsuba 3 (PyPI) into target/mitsuba-venv and verify it renders
-  mitsuba references         re-render the references of data/tests/mitsuba with Mitsuba 3";
+  mitsuba references         re-render the references of data/tests/mitsuba with Mitsuba 3
+";
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -28,7 +30,8 @@ fn main() -> ExitCode {
         Some("bench") => bench::run(&args[1..]),
         Some("test") => test::run(&args[1..]),
         Some("mitsuba") => mitsuba::run(&args[1..]),
-        _ => Err(USAGE.to_string()),
+        Some("sweep") => sweep::run(&args[1..]),
+        _ => Err(format!("{USAGE}{}", sweep::USAGE)),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,314 @@
+//! The aggregate of a sweep: `report.md` with a table per run, metrics per spp, the loss curves
+//! (`curves.csv`, `train-loss.svg`, `test-loss.svg`), error against run time, and the thesis's claims.
+
+use std::collections::BTreeSet;
+use std::fmt::Write;
+use std::path::Path;
+
+use super::claims::{Claim, PSNR_MARGIN_DB, claims};
+use super::plot;
+use super::results::{RunResult, mean};
+use super::spec::{Scale, Sweep, flags};
+use crate::util::Result;
+
+fn opt(v: Option<f64>, digits: usize) -> String {
+    v.filter(|x| x.is_finite()).map_or("–".into(), |x| format!("{x:.digits$}"))
+}
+
+fn write_file(path: &Path, text: &str) -> Result<()> {
+    let tmp = path.with_extension("tmp");
+    std::fs::write(&tmp, text).map_err(|e| format!("{}: {e}", tmp.display()))?;
+    std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// Writes the report of one sweep into `dir` and returns its claims.
+pub fn write(sweep: &Sweep, scale: &Scale, results: &[RunResult], dir: &Path) -> Result<Vec<Claim>> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let done: Vec<&RunResult> = results.iter().filter(|r| r.done).collect();
+    let mut md = String::new();
+    let _ = writeln!(md, "# Sweep `{}` at scale `{}`\n\n{}\n", sweep.name, scale.name, sweep.description);
+    let _ = writeln!(
+        md,
+        "{} of {} runs complete. Reproduce: `cargo xtask sweep {} --scale {}`.\n",
+        done.len(),
+        results.len(),
+        sweep.name,
+        scale.name
+    );
+    let missing: Vec<&str> = results.iter().filter(|r| !r.done).map(|r| r.run.name.as_str()).collect();
+    if !missing.is_empty() {
+        let _ = writeln!(md, "Not complete: {}.\n", missing.join(", "));
+    }
+
+    // Runs.
+    let _ = writeln!(md, "## Runs\n");
+    let _ = writeln!(
+        md,
+        "Test metrics are means over the test views and spp of the final model (`hush eval`); losses are those \
+         of `hush train`'s `metrics.csv` (test loss on whole test images).\n"
+    );
+    // The flags every run shares are shown once; the table shows those that differ.
+    let mut common = done.first().map(|r| r.run.train.clone()).unwrap_or_default();
+    common.retain(|k, v| done.iter().all(|r| r.run.train.get(k) == Some(v)));
+    let _ = writeln!(md, "Every run: `hush train {}`.\n", flags(&common).join(" "));
+    let _ = writeln!(
+        md,
+        "| run | other flags | epochs | s/epoch | train loss | test loss | best test loss (epoch) | gap | PSNR | \
+         SSIM | MAE | relMSE | denoise s |"
+    );
+    let _ = writeln!(md, "|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|");
+    for r in &done {
+        let rows = r.model_rows();
+        let m = |f: &dyn Fn(&super::results::EvalRow) -> Option<f64>| mean(rows.iter().filter_map(|x| f(x)));
+        let last = r.last_tested();
+        let _ = writeln!(
+            md,
+            "| {} | `{}` | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            r.run.name,
+            flags(
+                &r.run
+                    .train
+                    .iter()
+                    .filter(|(k, _)| !common.contains_key(*k))
+                    .map(|(k, v)| (k.clone(), v.clone()))
+                    .collect()
+            )
+            .join(" "),
+            r.epochs.last().map_or(0, |e| e.epoch),
+            opt(r.seconds_per_epoch(), 2),
+            opt(last.map(|l| l.1), 4),
+            opt(last.map(|l| l.2), 4),
+            r.best().map_or("–".into(), |(e, l)| format!("{l:.4} ({e})")),
+            opt(last.map(|l| l.2 - l.1), 4),
+            opt(m(&|x| x.psnr), 2),
+            opt(m(&|x| x.ssim), 4),
+            opt(m(&|x| x.mae), 4),
+            opt(m(&|x| x.rel_mse), 4),
+            opt(m(&|x| x.denoise_seconds), 3),
+        );
+    }
+
+    // Per spp.
+    let spps: BTreeSet<u64> = done.iter().flat_map(|r| r.model_rows()).map(|r| r.spp).collect();
+    if !spps.is_empty() {
+        let _ = writeln!(md, "\n## PSNR (dB) / SSIM per spp\n\nMeans over the test views.\n");
+        let head: Vec<String> = spps.iter().map(|s| format!("{s} spp")).collect();
+        let _ = writeln!(md, "| method | {} |", head.join(" | "));
+        let _ = writeln!(md, "|---|{}", "--:|".repeat(spps.len()));
+        let cell = |rows: &[&super::results::EvalRow], spp: u64| {
+            let at: Vec<_> = rows.iter().filter(|r| r.spp == spp).collect();
+            format!(
+                "{} / {}",
+                opt(mean(at.iter().filter_map(|r| r.psnr)), 2),
+                opt(mean(at.iter().filter_map(|r| r.ssim)), 4)
+            )
+        };
+        if let Some(first) = done.first() {
+            let noisy = first.noisy_rows();
+            let _ =
+                writeln!(md, "| noisy | {} |", spps.iter().map(|&s| cell(&noisy, s)).collect::<Vec<_>>().join(" | "));
+        }
+        for r in &done {
+            let rows = r.model_rows();
+            let _ = writeln!(
+                md,
+                "| {} | {} |",
+                r.run.name,
+                spps.iter().map(|&s| cell(&rows, s)).collect::<Vec<_>>().join(" | ")
+            );
+        }
+    }
+
+    // Error against run time.
+    if !done.is_empty() {
+        let _ = writeln!(
+            md,
+            "\n## Error against run time\n\nPer spp: the noisy render's seconds, then each model's render + denoise \
+             seconds and PSNR (means over the test views).\n"
+        );
+        let _ = writeln!(md, "| spp | method | render s | denoise s | total s | PSNR (dB) |");
+        let _ = writeln!(md, "|--:|---|--:|--:|--:|--:|");
+        for &spp in &spps {
+            let noisy: Vec<_> = done[0].noisy_rows().into_iter().filter(|r| r.spp == spp).collect();
+            let render = mean(noisy.iter().filter_map(|r| r.render_seconds));
+            let _ = writeln!(
+                md,
+                "| {spp} | noisy | {} | – | {} | {} |",
+                opt(render, 2),
+                opt(render, 2),
+                opt(mean(noisy.iter().filter_map(|r| r.psnr)), 2)
+            );
+            for r in &done {
+                let rows: Vec<_> = r.model_rows().into_iter().filter(|x| x.spp == spp).collect();
+                let den = mean(rows.iter().filter_map(|x| x.denoise_seconds));
+                let _ = writeln!(
+                    md,
+                    "| {spp} | {} | {} | {} | {} | {} |",
+                    r.run.name,
+                    opt(render, 2),
+                    opt(den, 3),
+                    opt(render.zip(den).map(|(a, b)| a + b), 2),
+                    opt(mean(rows.iter().filter_map(|x| x.psnr)), 2)
+                );
+            }
+        }
+    }
+
+    // Curves.
+    let mut csv = String::from("run,epoch,train_loss,test_loss,seconds\n");
+    for r in &done {
+        for e in &r.epochs {
+            let _ = writeln!(
+                csv,
+                "{},{},{},{},{}",
+                r.run.name,
+                e.epoch,
+                e.train_loss,
+                e.test_loss.map(|t| t.to_string()).unwrap_or_default(),
+                e.seconds
+            );
+        }
+    }
+    write_file(&dir.join("curves.csv"), &csv)?;
+    let train: Vec<plot::Series> = done
+        .iter()
+        .map(|r| (r.run.name.clone(), r.epochs.iter().map(|e| (e.epoch as f64, e.train_loss)).collect()))
+        .collect();
+    let test: Vec<plot::Series> = done
+        .iter()
+        .map(|r| (r.run.name.clone(), r.epochs.iter().filter_map(|e| Some((e.epoch as f64, e.test_loss?))).collect()))
+        .collect();
+    let _ = writeln!(md, "\n## Loss over epochs\n\nAll rows: `curves.csv`.\n");
+    for (file, title, series) in [("train-loss.svg", "training loss", &train), ("test-loss.svg", "test loss", &test)] {
+        if let Some(svg) = plot::lines(&format!("{}: {title}", sweep.name), "epoch", title, series, true) {
+            write_file(&dir.join(file), &svg)?;
+            let _ = writeln!(md, "![{title}]({file})\n");
+        }
+    }
+    // A compact table of the test loss at up to 12 evaluated epochs.
+    let epochs: BTreeSet<usize> =
+        done.iter().flat_map(|r| r.epochs.iter().filter(|e| e.test_loss.is_some()).map(|e| e.epoch)).collect();
+    if !epochs.is_empty() {
+        let list: Vec<usize> = epochs.iter().copied().collect();
+        let stride = list.len().div_ceil(12);
+        let mut picked: Vec<usize> = list.iter().copied().step_by(stride).collect();
+        if picked.last() != list.last() {
+            picked.push(*list.last().expect("not empty"));
+        }
+        let _ = writeln!(md, "Test loss by epoch (train loss in parentheses):\n");
+        let _ = writeln!(md, "| run | {} |", picked.iter().map(|e| format!("{e}")).collect::<Vec<_>>().join(" | "));
+        let _ = writeln!(md, "|---|{}", "--:|".repeat(picked.len()));
+        for r in &done {
+            let cells: Vec<String> = picked
+                .iter()
+                .map(|&p| match r.epochs.iter().find(|e| e.epoch == p) {
+                    Some(e) => format!("{} ({:.4})", opt(e.test_loss, 4), e.train_loss),
+                    None => "–".into(),
+                })
+                .collect();
+            let _ = writeln!(md, "| {} | {} |", r.run.name, cells.join(" | "));
+        }
+    }
+
+    // Claims.
+    let claims = claims(&sweep.name, results);
+    md += &claims_section(&claims);
+    write_file(&dir.join("report.md"), &md)?;
+    Ok(claims)
+}
+
+/// The claims table with the rule that decided them.
+pub fn claims_section(claims: &[Claim]) -> String {
+    let mut md = String::new();
+    if claims.is_empty() {
+        return md;
+    }
+    let _ = writeln!(
+        md,
+        "\n## The thesis's findings\n\nRule: runs A and B are compared on the rows of the same seed, test view and spp; \
+         d̄ is the mean of the differences (positive = the thesis's direction), SE their standard error. \
+         Reproduced when d̄ > 2·SE, refuted when d̄ < −2·SE, inconclusive otherwise or with fewer than 2 pairs. \
+         \"Little difference\" claims: reproduced when |d̄| + 2·SE < {PSNR_MARGIN_DB} dB, refuted when |d̄| − 2·SE > \
+         {PSNR_MARGIN_DB} dB. Rows of one view at several spp are not independent: SE is optimistic.\n"
+    );
+    let _ = writeln!(md, "| sweep | thesis | measured | verdict |");
+    let _ = writeln!(md, "|---|---|---|---|");
+    for c in claims {
+        let _ = writeln!(md, "| {} | {} | {} | {} |", c.sweep, c.thesis, c.measured, c.verdict);
+    }
+    md
+}
+
+/// The report of `all`: every sweep's claims in one table, with links to the sweeps' reports.
+pub fn write_all(scale: &Scale, sweeps: &[(String, Vec<Claim>)], dir: &Path) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let mut md = format!("# Every sweep at scale `{}`\n\n{}\n\n", scale.name, scale_note(scale));
+    for (name, _) in sweeps {
+        let _ = writeln!(md, "- [{name}](../../{name}/{}/report.md)", scale.name);
+    }
+    let all: Vec<Claim> = sweeps.iter().flat_map(|(_, c)| c.iter().cloned()).collect();
+    md += &claims_section(&all);
+    write_file(&dir.join("report.md"), &md)
+}
+
+fn scale_note(scale: &Scale) -> String {
+    format!(
+        "Dataset: `hush dataset {} {}`; every run also gets `{}`; seeds {:?}.",
+        scale.scenes.join(" "),
+        flags(&scale.dataset).join(" "),
+        flags(&scale.train).join(" "),
+        scale.seeds
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sweep::results::{Epoch, EvalRow};
+    use crate::sweep::spec::{parse_scales, parse_sweep};
+
+    #[test]
+    fn a_report_with_a_missing_run() {
+        let scales = "[tiny]\nscenes=[\"a\"]\n[small]\nscenes=[\"a\"]\n[thesis]\nscenes=[\"a\"]\n";
+        let scale = parse_scales(scales, Path::new("s.toml")).unwrap().remove(0);
+        let text =
+            "[[axis]]\nname = \"arch\"\nvariants = [{ name = \"oidn\" }, { name = \"dae\", arch = \"autoencoder\" }]";
+        let sweep = parse_sweep("architecture", text, Path::new("a.toml")).unwrap();
+        let runs = sweep.runs(&scale);
+        let row = |method: &str, psnr| EvalRow {
+            view: "v".into(),
+            method: method.into(),
+            spp: 4,
+            psnr: Some(psnr),
+            ssim: Some(0.5),
+            mae: None,
+            rel_mse: None,
+            render_seconds: Some(2.0),
+            denoise_seconds: (method != "noisy").then_some(0.5),
+        };
+        let results = vec![
+            RunResult {
+                run: runs[0].clone(),
+                done: true,
+                epochs: vec![Epoch { epoch: 1, train_loss: 0.5, test_loss: Some(0.6), seconds: 3.0 }],
+                eval: vec![row("noisy", 20.0), row("train/model", 25.0)],
+            },
+            RunResult { run: runs[1].clone(), done: false, epochs: vec![], eval: vec![] },
+        ];
+        let dir = std::env::temp_dir().join(format!("xtask-report-{}", std::process::id()));
+        let claims = write(&sweep, &scale, &results, &dir).unwrap();
+        let md = std::fs::read_to_string(dir.join("report.md")).unwrap();
+        assert!(md.contains("1 of 2 runs complete"), "{md}");
+        assert!(md.contains("Not complete: dae."));
+        assert!(
+            md.contains("| oidn | `` | 1 | 3.00 | 0.5000 | 0.6000 | 0.6000 (1) | 0.1000 | 25.00 | 0.5000 |"),
+            "{md}"
+        );
+        assert!(md.contains("| 4 | oidn | 2.00 | 0.500 | 2.50 | 25.00 |"), "{md}");
+        assert!(md.contains("| noisy | 20.00 / 0.5000 |"));
+        assert_eq!(claims[0].verdict, crate::sweep::claims::Verdict::NotMeasured);
+        assert!(md.contains("not measured"));
+        assert!(dir.join("curves.csv").is_file() && dir.join("test-loss.svg").is_file());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
