@@ -10,6 +10,7 @@ mod plot;
 mod report;
 mod results;
 mod slurm;
+mod slurm_selftest;
 mod spec;
 
 use std::path::{Path, PathBuf};
@@ -20,16 +21,19 @@ use spec::{Run, Scale, Sweep};
 
 use crate::util::{Result, build_hush, ensure_vulkan, release, target_dir};
 
-pub const USAGE: &str = "  sweep <name|all> [--scale tiny|small|thesis] [--jobs N] [--release] [--hush PATH]
-             [--list | --prepare | --run I | --emit slurm | --collect]
+pub const USAGE: &str =
+    "  sweep <name|all> [--scale tiny|small|thesis] [--jobs N] [--release] [--hush PATH] [--out DIR]
+             [--list | --prepare | --run I | --emit slurm [--cpus-per-task N] | --collect]
                              the thesis's hyperparameter sweeps (data/sweeps/<name>.toml): resumable runs of
                              hush train + hush eval on N workers, or a Slurm job array; the report is
-                             target/sweeps/<name>/<scale>/report.md";
+                             target/sweeps/<name>/<scale>/report.md
+  sweep slurm-selftest       a single-node Slurm on localhost (installs slurm-wlm) runs the tiny loss sweep";
 
-/// `RAYON_NUM_THREADS` of one worker's `hush`, and so the default worker count (cores / this). On the
-/// 2-core machine this was measured on, one worker with 2 threads finished the tiny sweeps faster than
-/// two workers with 1 thread each (README, "Sweeps").
-const THREADS_PER_WORKER: usize = 2;
+/// `RAYON_NUM_THREADS` of one worker's `hush`, and so the default worker count (cores / this). On a
+/// busy 2-core machine `sweep all --scale tiny` took 35 and 42 s with 2 workers of 1 thread against 75 and 95 s
+/// with 1 worker of 2 threads: a run's process start, loading and evaluation are serial, and Candle's
+/// threads gain little at these sizes.
+const THREADS_PER_WORKER: usize = 1;
 
 #[derive(Debug)]
 struct Options {
@@ -37,6 +41,9 @@ struct Options {
     scale: String,
     jobs: Option<usize>,
     hush: Option<PathBuf>,
+    /// The sweeps' root folder [default: target/sweeps].
+    out: Option<PathBuf>,
+    cpus_per_task: Option<usize>,
     release: bool,
     action: Action,
 }
@@ -55,8 +62,16 @@ fn parse(args: &[String]) -> Result<Options> {
     let usage = || format!("usage: cargo xtask {}", USAGE.trim_start());
     let mut it = args.iter();
     let name = it.next().filter(|n| !n.starts_with("--")).ok_or_else(usage)?.clone();
-    let mut o =
-        Options { name, scale: "tiny".into(), jobs: None, hush: None, release: release(args), action: Action::Sweep };
+    let mut o = Options {
+        name,
+        scale: "tiny".into(),
+        jobs: None,
+        hush: None,
+        out: None,
+        cpus_per_task: None,
+        release: release(args),
+        action: Action::Sweep,
+    };
     let set = |o: &mut Options, a: Action| {
         if o.action != Action::Sweep {
             return Err(format!("give only one of --list, --prepare, --run, --emit, --collect\n{}", usage()));
@@ -73,6 +88,12 @@ fn parse(args: &[String]) -> Result<Options> {
                 o.jobs = Some(v.parse().ok().filter(|&n| n > 0).ok_or(format!("--jobs {v}: give a number ≥ 1"))?);
             }
             "--hush" => o.hush = Some(PathBuf::from(value()?)),
+            "--out" => o.out = Some(PathBuf::from(value()?)),
+            "--cpus-per-task" => {
+                let v = value()?;
+                let n = v.parse().ok().filter(|&n| n > 0).ok_or(format!("--cpus-per-task {v}: give a number ≥ 1"))?;
+                o.cpus_per_task = Some(n);
+            }
             "--release" => {}
             "--list" => set(&mut o, Action::List)?,
             "--prepare" => set(&mut o, Action::Prepare)?,
@@ -132,13 +153,81 @@ fn collect(sweeps: &[Sweep], scale: &Scale, runs: &[Run], layout: &Layout) -> Re
     Ok(())
 }
 
-pub fn run(args: &[String]) -> Result<()> {
-    let o = parse(args)?;
+/// Writes the Slurm job-array script of the sweep and returns its path.
+fn emit_slurm(o: &Options, scale: &Scale, runs: usize, layout: &Layout, hush: &Path) -> Result<PathBuf> {
+    let exe = std::env::current_exe().map_err(|e| format!("cannot find the xtask executable: {e}"))?;
+    let xtask = stable_copy(&exe, &layout.root.join("bin"), "xtask")?;
+    let dir = layout.sweep(&o.name, &scale.name).join("slurm");
+    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    // flock creates the lock file but not its folder.
+    let data = layout.root.join("data");
+    std::fs::create_dir_all(&data).map_err(|e| format!("{}: {e}", data.display()))?;
+    let lock = data.join(format!("{}.lock", scale.name));
+    let script = slurm::sbatch(&slurm::Job {
+        sweep: &o.name,
+        scale: &scale.name,
+        runs,
+        xtask: &xtask,
+        hush,
+        dir: &dir,
+        cpus_per_task: o.cpus_per_task.unwrap_or(THREADS_PER_WORKER),
+        data_lock: &lock,
+        out: &layout.root,
+    });
+    let path = dir.join("sweep.sbatch");
+    std::fs::write(&path, script).map_err(|e| format!("{}: {e}", path.display()))?;
+    Ok(path)
+}
+
+/// `sweep slurm-selftest`: the tiny `loss` sweep as a job array on a single-node Slurm started here.
+fn slurm_selftest(mut o: Options) -> Result<()> {
+    let root = o.out.clone().unwrap_or_else(|| target_dir().join("sweeps").join("slurm-selftest"));
+    let layout = Layout { root: root.join("sweeps") };
+    (o.name, o.scale) = ("loss".into(), "tiny".into());
     let defs = spec::sweeps_dir();
     let scale = spec::load_scale(&defs, &o.scale)?;
     let sweeps = spec::load_sweeps(&defs, &o.name)?;
     let runs: Vec<Run> = sweeps.iter().flat_map(|s| s.runs(&scale)).collect();
-    let layout = Layout { root: target_dir().join("sweeps") };
+    ensure_vulkan()?;
+    let hush = hush(&o, &layout)?;
+    // Start from no runs, so that the array really trains and evaluates them all (the dataset stays).
+    let sweep_dir = layout.root.join(&o.name);
+    if sweep_dir.exists() {
+        std::fs::remove_dir_all(&sweep_dir).map_err(|e| format!("cannot clear {}: {e}", sweep_dir.display()))?;
+    }
+    let script = emit_slurm(&o, &scale, runs.len(), &layout, &hush)?;
+    let (daemons, conf) = slurm_selftest::start(&root.join("slurm"))?;
+    let start = std::time::Instant::now();
+    crate::util::spawn(std::process::Command::new("sbatch").arg("--wait").arg(&script).env("SLURM_CONF", &conf))?;
+    let seconds = start.elapsed().as_secs_f64();
+    drop(daemons);
+    let missing: Vec<&str> = runs
+        .iter()
+        .filter(|r| !layout.run(r, &scale.name).join("done.json").is_file())
+        .map(|r| r.name.as_str())
+        .collect();
+    if !missing.is_empty() {
+        return Err(format!(
+            "the Slurm array left runs unfinished: {}; see {}",
+            missing.join(", "),
+            script.with_file_name("slurm-*.out").display()
+        ));
+    }
+    collect(&sweeps, &scale, &runs, &layout)?;
+    println!("slurm-selftest: {} array tasks completed every run in {seconds:.1} s", runs.len());
+    Ok(())
+}
+
+pub fn run(args: &[String]) -> Result<()> {
+    let o = parse(args)?;
+    if o.name == "slurm-selftest" {
+        return slurm_selftest(o);
+    }
+    let defs = spec::sweeps_dir();
+    let scale = spec::load_scale(&defs, &o.scale)?;
+    let sweeps = spec::load_sweeps(&defs, &o.name)?;
+    let runs: Vec<Run> = sweeps.iter().flat_map(|s| s.runs(&scale)).collect();
+    let layout = Layout { root: o.out.clone().unwrap_or_else(|| target_dir().join("sweeps")) };
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let workers = o.jobs.unwrap_or((cores / THREADS_PER_WORKER).max(1));
     let threads = (cores / workers).max(1);
@@ -156,25 +245,8 @@ pub fn run(args: &[String]) -> Result<()> {
             exec::prepare_dataset(&hush(&o, &layout)?, &scale, &layout).map(drop)
         }
         Action::EmitSlurm => {
-            let hush = hush(&o, &layout)?;
-            let exe = std::env::current_exe().map_err(|e| format!("cannot find the xtask executable: {e}"))?;
-            let xtask = stable_copy(&exe, &layout.root.join("bin"), "xtask")?;
-            let dir = layout.sweep(&o.name, &scale.name).join("slurm");
-            std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-            let lock = layout.root.join("data").join(format!("{}.lock", scale.name));
-            let script = slurm::sbatch(&slurm::Job {
-                sweep: &o.name,
-                scale: &scale.name,
-                runs: runs.len(),
-                xtask: &xtask,
-                hush: &hush,
-                dir: &dir,
-                cpus_per_task: o.jobs.map_or(THREADS_PER_WORKER, |_| threads),
-                data_lock: &lock,
-            });
-            let path = dir.join("sweep.sbatch");
-            std::fs::write(&path, script).map_err(|e| format!("{}: {e}", path.display()))?;
-            println!("{}\nsubmit: sbatch {}", path.display(), path.display());
+            let script = emit_slurm(&o, &scale, runs.len(), &layout, &hush(&o, &layout)?)?;
+            println!("{}\nsubmit: sbatch {}", script.display(), script.display());
             println!("then:   cargo xtask sweep {} --scale {} --collect", o.name, scale.name);
             Ok(())
         }

@@ -18,12 +18,14 @@ pub struct Job<'a> {
     pub dir: &'a Path,
     pub cpus_per_task: usize,
     pub data_lock: &'a Path,
+    /// The sweeps' root folder (`--out`).
+    pub out: &'a Path,
 }
 
 /// The sbatch script.
 pub fn sbatch(job: &Job) -> String {
-    let Job { sweep, scale, runs, xtask, hush, dir, cpus_per_task, data_lock } = job;
-    let (x, h, d, l) = (xtask.display(), hush.display(), dir.display(), data_lock.display());
+    let Job { sweep, scale, runs, xtask, hush, dir, cpus_per_task, data_lock, out } = job;
+    let (x, h, d, l, o) = (xtask.display(), hush.display(), dir.display(), data_lock.display(), out.display());
     let last = runs.saturating_sub(1);
     format!(
         "#!/bin/bash
@@ -38,8 +40,8 @@ pub fn sbatch(job: &Job) -> String {
 set -euo pipefail
 export RAYON_NUM_THREADS=\"${{SLURM_CPUS_PER_TASK:-{cpus_per_task}}}\"
 # The first task renders the scale's dataset; the others wait for it on the lock, then find it complete.
-flock {l} {x} sweep {sweep} --scale {scale} --prepare --hush {h}
-exec {x} sweep {sweep} --scale {scale} --run \"$SLURM_ARRAY_TASK_ID\" --hush {h}
+flock {l} {x} sweep {sweep} --scale {scale} --out {o} --prepare --hush {h}
+exec {x} sweep {sweep} --scale {scale} --out {o} --run \"$SLURM_ARRAY_TASK_ID\" --hush {h}
 "
     )
 }
@@ -59,14 +61,15 @@ mod tests {
             dir: Path::new("/s/loss/tiny/slurm"),
             cpus_per_task: 2,
             data_lock: Path::new("/s/data/tiny.lock"),
+            out: Path::new("/s"),
         });
         assert!(script.starts_with("#!/bin/bash\n"));
         for line in [
             "#SBATCH --array=0-4\n",
             "#SBATCH --cpus-per-task=2\n",
             "#SBATCH --output=/s/loss/tiny/slurm/slurm-%A_%a.out\n",
-            "flock /s/data/tiny.lock /s/bin/xtask sweep loss --scale tiny --prepare --hush /s/bin/hush\n",
-            "exec /s/bin/xtask sweep loss --scale tiny --run \"$SLURM_ARRAY_TASK_ID\" --hush /s/bin/hush\n",
+            "flock /s/data/tiny.lock /s/bin/xtask sweep loss --scale tiny --out /s --prepare --hush /s/bin/hush\n",
+            "exec /s/bin/xtask sweep loss --scale tiny --out /s --run \"$SLURM_ARRAY_TASK_ID\" --hush /s/bin/hush\n",
             "export RAYON_NUM_THREADS=\"${SLURM_CPUS_PER_TASK:-2}\"\n",
         ] {
             assert!(script.contains(line), "missing {line:?} in\n{script}");
