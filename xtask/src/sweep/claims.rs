@@ -441,6 +441,7 @@ mod tests {
                 rel_mse: None,
                 render_seconds: None,
                 denoise_seconds: None,
+                preview: None,
             })
             .collect();
         let epochs = epochs

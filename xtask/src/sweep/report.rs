@@ -119,6 +119,25 @@ pub fn write(sweep: &Sweep, scale: &Scale, results: &[RunResult], dir: &Path) ->
         }
     }
 
+    // Images: one test view at the lowest spp, noisy and every run's result.
+    if let Some((view, spp)) =
+        done.iter().flat_map(|r| r.model_rows()).map(|r| (r.view.clone(), r.spp)).min_by_key(|k| k.1)
+    {
+        let at = |r: &RunResult, noisy: bool| {
+            let rows = if noisy { r.noisy_rows() } else { r.model_rows() };
+            let row = rows.into_iter().find(|x| x.view == view && x.spp == spp)?;
+            Some(format!("{}/eval/{}", r.run.name, row.preview.as_ref()?))
+        };
+        let mut head = vec!["noisy".to_string()];
+        let mut cells = vec![done.iter().find_map(|r| at(r, true)).map_or("–".into(), |p| format!("![noisy]({p})"))];
+        for r in &done {
+            head.push(r.run.name.clone());
+            cells.push(at(r, false).map_or("–".into(), |p| format!("![{}]({p})", r.run.name)));
+        }
+        let _ = writeln!(md, "\n## Images\n\n{view} at {spp} spp (tonemapped previews of `hush eval`).\n");
+        let _ = writeln!(md, "| {} |\n|{}\n| {} |", head.join(" | "), "---|".repeat(head.len()), cells.join(" | "));
+    }
+
     // Error against run time.
     if !done.is_empty() {
         let _ = writeln!(
@@ -214,6 +233,7 @@ pub fn write(sweep: &Sweep, scale: &Scale, results: &[RunResult], dir: &Path) ->
     let claims = claims(&sweep.name, results);
     md += &claims_section(&claims);
     write_file(&dir.join("report.md"), &md)?;
+    write_file(&dir.join("report.html"), &html(&md, &format!("{} at {}", sweep.name, scale.name)))?;
     Ok(claims)
 }
 
@@ -248,7 +268,101 @@ pub fn write_all(scale: &Scale, sweeps: &[(String, Vec<Claim>)], dir: &Path) -> 
     }
     let all: Vec<Claim> = sweeps.iter().flat_map(|(_, c)| c.iter().cloned()).collect();
     md += &claims_section(&all);
-    write_file(&dir.join("report.md"), &md)
+    write_file(&dir.join("report.md"), &md)?;
+    write_file(&dir.join("report.html"), &html(&md, &format!("every sweep at {}", scale.name)))
+}
+
+/// Inline Markdown of the reports (code, bold, images, links) as HTML.
+fn inline(text: &str) -> String {
+    let mut t = text.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;");
+    for (mark, open, close) in [("`", "<code>", "</code>"), ("**", "<b>", "</b>")] {
+        let mut out = String::new();
+        let mut parts = t.split(mark).peekable();
+        let mut odd = false;
+        while let Some(p) = parts.next() {
+            out += p;
+            if parts.peek().is_some() {
+                out += if odd { close } else { open };
+                odd = !odd;
+            }
+        }
+        t = out;
+    }
+    // ![alt](src) and [text](href); links to reports go to their HTML twins.
+    let mut out = String::new();
+    let mut rest = t.as_str();
+    while let Some(i) = rest.find('[') {
+        let image = i > 0 && rest.as_bytes()[i - 1] == b'!';
+        let parsed = rest[i..].find("](").and_then(|j| Some((j, rest[i + j..].find(')')? + i + j)));
+        let Some((j, k)) = parsed else { break };
+        let (label, target) = (&rest[i + 1..i + j], &rest[i + j + 2..k]);
+        out += &rest[..if image { i - 1 } else { i }];
+        out += &if image {
+            format!("<img src=\"{target}\" alt=\"{label}\" style=\"max-width:100%\">")
+        } else {
+            format!("<a href=\"{}\">{label}</a>", target.replace("report.md", "report.html"))
+        };
+        rest = &rest[k + 1..];
+    }
+    out + rest
+}
+
+/// The report's Markdown (headings, paragraphs, lists, pipe tables) as a standalone HTML page.
+pub fn html(md: &str, title: &str) -> String {
+    let mut out = format!(
+        "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{}</title><style>body{{font-family:sans-serif;\
+         max-width:1200px;margin:auto}}table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:2px 6px;\
+         text-align:right}}td:first-child{{text-align:left}}</style></head><body>\n",
+        inline(title)
+    );
+    let mut in_table = false;
+    let mut in_list = false;
+    for line in md.lines() {
+        let cells = line.strip_prefix('|').and_then(|l| l.strip_suffix('|'));
+        if in_table && cells.is_none() {
+            out += "</table>\n";
+            in_table = false;
+        }
+        if in_list && !line.starts_with("- ") {
+            out += "</ul>\n";
+            in_list = false;
+        }
+        if let Some(cells) = cells {
+            let cells: Vec<&str> = cells.split('|').map(str::trim).collect();
+            if cells.iter().all(|c| !c.is_empty() && c.chars().all(|ch| matches!(ch, '-' | ':'))) {
+                continue;
+            }
+            let tag = if in_table { "td" } else { "th" };
+            if !in_table {
+                out += "<table>\n";
+                in_table = true;
+            }
+            out += "<tr>";
+            for c in cells {
+                out += &format!("<{tag}>{}</{tag}>", inline(c));
+            }
+            out += "</tr>\n";
+        } else if let Some(h) = line.strip_prefix("## ") {
+            out += &format!("<h2>{}</h2>\n", inline(h));
+        } else if let Some(h) = line.strip_prefix("# ") {
+            out += &format!("<h1>{}</h1>\n", inline(h));
+        } else if let Some(item) = line.strip_prefix("- ") {
+            if !in_list {
+                out += "<ul>\n";
+                in_list = true;
+            }
+            out += &format!("<li>{}</li>\n", inline(item));
+        } else if !line.trim().is_empty() {
+            out += &format!("<p>{}</p>\n", inline(line));
+        }
+    }
+    if in_table {
+        out += "</table>\n";
+    }
+    if in_list {
+        out += "</ul>\n";
+    }
+    out + "</body></html>\n"
 }
 
 fn scale_note(scale: &Scale) -> String {
@@ -265,6 +379,20 @@ fn scale_note(scale: &Scale) -> String {
 mod tests {
     use super::*;
     use crate::sweep::results::{Epoch, EvalRow};
+
+    #[test]
+    fn markdown_to_html() {
+        let page =
+            html("# T `x`\n\n- [a](a/report.md)\n\n| h | i |\n|---|--:|\n| **r** | 1 < 2 |\ntext ![p](q.png)\n", "t");
+        for want in [
+            "<h1>T <code>x</code></h1>",
+            "<ul>\n<li><a href=\"a/report.html\">a</a></li>\n</ul>",
+            "<table>\n<tr><th>h</th><th>i</th></tr>\n<tr><td><b>r</b></td><td>1 &lt; 2</td></tr>\n</table>",
+            "<p>text <img src=\"q.png\" alt=\"p\" style=\"max-width:100%\"></p>",
+        ] {
+            assert!(page.contains(want), "missing {want:?} in {page}");
+        }
+    }
     use crate::sweep::spec::{parse_scales, parse_sweep};
 
     #[test]
@@ -285,6 +413,7 @@ mod tests {
             rel_mse: None,
             render_seconds: Some(2.0),
             denoise_seconds: (method != "noisy").then_some(0.5),
+            preview: Some(format!("previews/{method}.png")),
         };
         let results = vec![
             RunResult {
@@ -306,9 +435,18 @@ mod tests {
         );
         assert!(md.contains("| 4 | oidn | 2.00 | 0.500 | 2.50 | 25.00 |"), "{md}");
         assert!(md.contains("| noisy | 20.00 / 0.5000 |"));
+        assert!(
+            md.contains("| ![noisy](oidn/eval/previews/noisy.png) | ![oidn](oidn/eval/previews/train/model.png) |"),
+            "{md}"
+        );
         assert_eq!(claims[0].verdict, crate::sweep::claims::Verdict::NotMeasured);
         assert!(md.contains("not measured"));
         assert!(dir.join("curves.csv").is_file() && dir.join("test-loss.svg").is_file());
+        let page = std::fs::read_to_string(dir.join("report.html")).unwrap();
+        assert!(page.contains("<h1>Sweep <code>architecture</code> at scale <code>tiny</code></h1>"), "{page}");
+        assert!(page.contains("<th>run</th><th>other flags</th>"));
+        assert!(page.contains("<td><img src=\"oidn/eval/previews/train/model.png\" alt=\"oidn\""));
+        assert!(!page.contains("|---"));
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

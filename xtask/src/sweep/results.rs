@@ -32,6 +32,8 @@ pub struct EvalRow {
     pub render_seconds: Option<f64>,
     /// Denoise seconds of a model.
     pub denoise_seconds: Option<f64>,
+    /// The PNG preview, relative to the evaluation folder.
+    pub preview: Option<String>,
 }
 
 /// A run and its results (empty where a file is missing).
@@ -79,6 +81,7 @@ pub fn parse_eval(summary: &Value) -> Vec<EvalRow> {
                 rel_mse: f("rel_mse"),
                 render_seconds: f("render_seconds").or(if is_image { f("seconds") } else { None }),
                 denoise_seconds: f("denoise_seconds").or(if is_image { None } else { f("seconds") }),
+                preview: r["preview"].as_str().map(String::from),
                 method,
             })
         })
@@ -168,12 +171,13 @@ mod tests {
     #[test]
     fn eval_rows_of_both_schemas() {
         let v1 = serde_json::json!({"rows": [
-            {"view": "v", "method": "noisy", "spp": 4, "psnr": 20.0, "ssim": 0.5, "seconds": 1.5},
+            {"view": "v", "method": "noisy", "spp": 4, "psnr": 20.0, "ssim": 0.5, "seconds": 1.5, "preview": "p/n.png"},
             {"view": "v", "method": "train/model", "spp": 4, "psnr": 30.0, "seconds": 0.2},
         ]});
         let rows = parse_eval(&v1);
         assert_eq!(rows[0].render_seconds, Some(1.5));
         assert_eq!(rows[0].denoise_seconds, None);
+        assert_eq!(rows[0].preview.as_deref(), Some("p/n.png"));
         assert_eq!(rows[1].denoise_seconds, Some(0.2));
         assert_eq!(rows[1].ssim, None);
         let v2 = serde_json::json!({"schema": 2, "rows": [
