@@ -134,20 +134,17 @@ fn hush(o: &Options, layout: &Layout) -> Result<PathBuf> {
 
 fn collect(sweeps: &[Sweep], scale: &Scale, runs: &[Run], layout: &Layout) -> Result<()> {
     let mut all = Vec::new();
+    let results: Vec<RunResult> = runs.iter().map(|r| RunResult::load(r, &layout.run(r, &scale.name))).collect();
     for sweep in sweeps {
-        let results: Vec<RunResult> = runs
-            .iter()
-            .filter(|r| r.sweep == sweep.name)
-            .map(|r| RunResult::load(r, &layout.run(r, &scale.name)))
-            .collect();
+        let mine: Vec<RunResult> = results.iter().filter(|r| r.run.sweep == sweep.name).cloned().collect();
         let dir = layout.sweep(&sweep.name, &scale.name);
-        let claims = report::write(sweep, scale, &results, &dir)?;
+        let claims = report::write(sweep, scale, &mine, &dir)?;
         println!("report: {}", dir.join("report.md").display());
         all.push((sweep.name.clone(), claims));
     }
     if sweeps.len() > 1 {
         let dir = layout.sweep("all", &scale.name);
-        report::write_all(scale, &all, &dir)?;
+        report::write_all(scale, &all, &results, &dir)?;
         println!("report: {}", dir.join("report.md").display());
     }
     Ok(())

@@ -139,38 +139,8 @@ pub fn write(sweep: &Sweep, scale: &Scale, results: &[RunResult], dir: &Path) ->
     }
 
     // Error against run time.
-    if !done.is_empty() {
-        let _ = writeln!(
-            md,
-            "\n## Error against run time\n\nPer spp: the noisy render's seconds, then each model's render + denoise \
-             seconds and PSNR (means over the test views).\n"
-        );
-        let _ = writeln!(md, "| spp | method | render s | denoise s | total s | PSNR (dB) |");
-        let _ = writeln!(md, "|--:|---|--:|--:|--:|--:|");
-        for &spp in &spps {
-            let noisy: Vec<_> = done[0].noisy_rows().into_iter().filter(|r| r.spp == spp).collect();
-            let render = mean(noisy.iter().filter_map(|r| r.render_seconds));
-            let _ = writeln!(
-                md,
-                "| {spp} | noisy | {} | – | {} | {} |",
-                opt(render, 2),
-                opt(render, 2),
-                opt(mean(noisy.iter().filter_map(|r| r.psnr)), 2)
-            );
-            for r in &done {
-                let rows: Vec<_> = r.model_rows().into_iter().filter(|x| x.spp == spp).collect();
-                let den = mean(rows.iter().filter_map(|x| x.denoise_seconds));
-                let _ = writeln!(
-                    md,
-                    "| {spp} | {} | {} | {} | {} | {} |",
-                    r.run.name,
-                    opt(render, 2),
-                    opt(den, 3),
-                    opt(render.zip(den).map(|(a, b)| a + b), 2),
-                    opt(mean(rows.iter().filter_map(|x| x.psnr)), 2)
-                );
-            }
-        }
+    if let Some(section) = error_vs_time(&done, |r| r.run.name.clone(), &sweep.name, dir)? {
+        md += &section;
     }
 
     // Curves.
@@ -237,6 +207,57 @@ pub fn write(sweep: &Sweep, scale: &Scale, results: &[RunResult], dir: &Path) ->
     Ok(claims)
 }
 
+/// The error-against-run-time table of `runs` (named by `label`) and its plot `error-vs-time.svg` in `dir`.
+fn error_vs_time(
+    runs: &[&RunResult],
+    label: impl Fn(&RunResult) -> String,
+    title: &str,
+    dir: &Path,
+) -> Result<Option<String>> {
+    let Some(first) = runs.first() else { return Ok(None) };
+    let spps: BTreeSet<u64> = runs.iter().flat_map(|r| r.model_rows()).map(|r| r.spp).collect();
+    let mut md = String::from(
+        "\n## Error against run time\n\nPer spp: the noisy render's seconds, then each model's render + denoise \
+         seconds and PSNR (means over the test views).\n\n| spp | method | render s | denoise s | total s | PSNR (dB) |\n\
+         |--:|---|--:|--:|--:|--:|\n",
+    );
+    let mut series: Vec<plot::Series> = Vec::new();
+    for run in std::iter::once(None).chain(runs.iter().map(|r| Some(*r))) {
+        let name = run.map_or("noisy".into(), &label);
+        let mut points = Vec::new();
+        for &spp in &spps {
+            let noisy: Vec<_> = first.noisy_rows().into_iter().filter(|r| r.spp == spp).collect();
+            let render = mean(noisy.iter().filter_map(|r| r.render_seconds));
+            let rows: Vec<_> = match run {
+                Some(r) => r.model_rows().into_iter().filter(|x| x.spp == spp).collect(),
+                None => noisy,
+            };
+            let den = if run.is_some() { mean(rows.iter().filter_map(|x| x.denoise_seconds)) } else { Some(0.0) };
+            let total = render.zip(den).map(|(a, b)| a + b);
+            let psnr = mean(rows.iter().filter_map(|x| x.psnr));
+            let den_cell = if run.is_some() { opt(den, 3) } else { "–".into() };
+            let _ = writeln!(
+                md,
+                "| {spp} | {name} | {} | {den_cell} | {} | {} |",
+                opt(render, 2),
+                opt(total, 2),
+                opt(psnr, 2)
+            );
+            if let (Some(t), Some(p)) = (total, psnr) {
+                points.push((t, p));
+            }
+        }
+        points.sort_by(|a, b| a.0.total_cmp(&b.0));
+        series.push((name, points));
+    }
+    let title = format!("{title}: PSNR against render + denoise seconds");
+    if let Some(svg) = plot::lines(&title, "seconds", "PSNR (dB)", &series, false) {
+        write_file(&dir.join("error-vs-time.svg"), &svg)?;
+        md += "\n![error against run time](error-vs-time.svg)\n";
+    }
+    Ok(Some(md))
+}
+
 /// The claims table with the rule that decided them.
 pub fn claims_section(claims: &[Claim]) -> String {
     let mut md = String::new();
@@ -259,12 +280,17 @@ pub fn claims_section(claims: &[Claim]) -> String {
     md
 }
 
-/// The report of `all`: every sweep's claims in one table, with links to the sweeps' reports.
-pub fn write_all(scale: &Scale, sweeps: &[(String, Vec<Claim>)], dir: &Path) -> Result<()> {
+/// The report of `all`: every model's error against run time and every sweep's claims, with links to the
+/// sweeps' reports.
+pub fn write_all(scale: &Scale, sweeps: &[(String, Vec<Claim>)], results: &[RunResult], dir: &Path) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let mut md = format!("# Every sweep at scale `{}`\n\n{}\n\n", scale.name, scale_note(scale));
     for (name, _) in sweeps {
         let _ = writeln!(md, "- [{name}](../../{name}/{}/report.md)", scale.name);
+    }
+    let done: Vec<&RunResult> = results.iter().filter(|r| r.done).collect();
+    if let Some(section) = error_vs_time(&done, |r| format!("{}/{}", r.run.sweep, r.run.name), "every model", dir)? {
+        md += &section;
     }
     let all: Vec<Claim> = sweeps.iter().flat_map(|(_, c)| c.iter().cloned()).collect();
     md += &claims_section(&all);
@@ -434,6 +460,8 @@ mod tests {
             "{md}"
         );
         assert!(md.contains("| 4 | oidn | 2.00 | 0.500 | 2.50 | 25.00 |"), "{md}");
+        assert!(md.contains("| 4 | noisy | 2.00 | – | 2.00 | 20.00 |"), "{md}");
+        assert!(dir.join("error-vs-time.svg").is_file());
         assert!(md.contains("| noisy | 20.00 / 0.5000 |"));
         assert!(
             md.contains("| ![noisy](oidn/eval/previews/noisy.png) | ![oidn](oidn/eval/previews/train/model.png) |"),
