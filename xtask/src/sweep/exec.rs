@@ -40,6 +40,8 @@ pub enum Outcome {
     Skipped,
     /// Trained and evaluated now, in this many seconds.
     Done(f64),
+    /// Linked to the run named here, which has the same settings.
+    Same(String),
     Failed(String),
 }
 
@@ -180,32 +182,87 @@ fn run_inner(hush: &Path, run: &Run, scale: &Scale, dataset: &Path, dir: &Path, 
     Ok(start.elapsed().as_secs_f64())
 }
 
-/// Runs every `(run, dir)` on `workers` threads, each `hush` with `RAYON_NUM_THREADS = threads`;
-/// prints a line per run and returns the outcomes in order.
+/// `to` relative to the folder `from` (both absolute, or both relative to the same folder).
+fn relative(from: &Path, to: &Path) -> PathBuf {
+    let (f, t): (Vec<_>, Vec<_>) = (from.components().collect(), to.components().collect());
+    let common = f.iter().zip(&t).take_while(|(a, b)| a == b).count();
+    let mut out: PathBuf = std::iter::repeat_n("..", f.len() - common).collect();
+    out.extend(&t[common..]);
+    out
+}
+
+/// Runs every `(run, scale, dataset, dir)` on `workers` threads, each `hush` with `RAYON_NUM_THREADS =
+/// threads`; prints a line per run and returns the outcomes in order. A run whose settings, seed, scale and
+/// dataset equal an earlier one's (the baseline recurs across sweeps) is not trained again: its folder
+/// becomes a symbolic link to the earlier run's, unless it exists already.
 pub fn run_all(hush: &Path, runs: &[(Run, &Scale, PathBuf, PathBuf)], workers: usize, threads: usize) -> Vec<Outcome> {
+    let key = |(run, scale, dataset, _): &(Run, &Scale, PathBuf, PathBuf)| {
+        format!("{}|{}|{}|{}", Value::Object(run.train.clone()), run.seed, scale.name, dataset.display())
+    };
+    let mut first = std::collections::HashMap::new();
+    let (mut order, mut aliases) = (Vec::new(), Vec::new());
+    for (i, job) in runs.iter().enumerate() {
+        match first.get(&key(job)) {
+            Some(&p) if std::fs::symlink_metadata(&job.3).is_err() => aliases.push((i, p)),
+            _ => {
+                first.entry(key(job)).or_insert(i);
+                order.push(i);
+            }
+        }
+    }
     let next = AtomicUsize::new(0);
     let outcomes = Mutex::new(vec![Outcome::Skipped; runs.len()]);
     let finished = AtomicUsize::new(0);
+    let report = |i: usize, outcome: &Outcome| {
+        let k = finished.fetch_add(1, Ordering::SeqCst) + 1;
+        let what = match outcome {
+            Outcome::Skipped => "complete already".to_string(),
+            Outcome::Done(s) => format!("done in {s:.1} s"),
+            Outcome::Same(other) => format!("same settings as {other}: linked to it"),
+            Outcome::Failed(e) => format!("FAILED: {e}"),
+        };
+        eprintln!("sweep: [{k}/{}] {}/{}: {what}", runs.len(), runs[i].0.sweep, runs[i].0.name);
+    };
     std::thread::scope(|s| {
         for _ in 0..workers.max(1) {
             s.spawn(|| {
-                loop {
-                    let i = next.fetch_add(1, Ordering::SeqCst);
-                    let Some((run, scale, dataset, dir)) = runs.get(i) else { break };
+                while let Some(&i) = order.get(next.fetch_add(1, Ordering::SeqCst)) {
+                    let (run, scale, dataset, dir) = &runs[i];
                     let outcome = run_one(hush, run, scale, dataset, dir, threads);
-                    let k = finished.fetch_add(1, Ordering::SeqCst) + 1;
-                    let what = match &outcome {
-                        Outcome::Skipped => "complete already".to_string(),
-                        Outcome::Done(s) => format!("done in {s:.1} s"),
-                        Outcome::Failed(e) => format!("FAILED: {e}"),
-                    };
-                    eprintln!("sweep: [{k}/{}] {}/{}: {what}", runs.len(), run.sweep, run.name);
+                    report(i, &outcome);
                     outcomes.lock().expect("no worker panics holding it")[i] = outcome;
                 }
             });
         }
     });
-    outcomes.into_inner().expect("no worker panicked")
+    let mut outcomes = outcomes.into_inner().expect("no worker panicked");
+    for (i, p) in aliases {
+        let (alias, target) = (&runs[i].3, &runs[p].3);
+        let outcome = match &outcomes[p] {
+            Outcome::Failed(e) => Outcome::Failed(e.clone()),
+            _ => {
+                let link = relative(alias.parent().unwrap_or(Path::new("")), target);
+                let made = alias.parent().map_or(Ok(()), std::fs::create_dir_all).and_then(|()| symlink(&link, alias));
+                match made {
+                    Ok(()) => Outcome::Same(format!("{}/{}", runs[p].0.sweep, runs[p].0.name)),
+                    Err(e) => Outcome::Failed(format!("cannot link {} to {}: {e}", alias.display(), link.display())),
+                }
+            }
+        };
+        report(i, &outcome);
+        outcomes[i] = outcome;
+    }
+    outcomes
+}
+
+#[cfg(unix)]
+fn symlink(target: &Path, link: &Path) -> std::io::Result<()> {
+    std::os::unix::fs::symlink(target, link)
+}
+
+#[cfg(not(unix))]
+fn symlink(_: &Path, _: &Path) -> std::io::Result<()> {
+    Err(std::io::Error::other("symbolic links need unix; run the sweeps one by one"))
 }
 
 #[cfg(test)]
@@ -246,6 +303,46 @@ mod tests {
         std::fs::write(&exe, script).unwrap();
         std::fs::set_permissions(&exe, std::fs::Permissions::from_mode(0o755)).unwrap();
         exe
+    }
+
+    #[test]
+    fn relative_paths() {
+        assert_eq!(
+            relative(Path::new("/s/loss/tiny"), Path::new("/s/features/tiny/dsnn")),
+            Path::new("../../features/tiny/dsnn")
+        );
+        assert_eq!(relative(Path::new("/s/a"), Path::new("/s/a/b")), Path::new("b"));
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_run_with_the_settings_of_an_earlier_one_is_linked_to_it() {
+        let dir = scratch("same");
+        let hush = fake_hush(&dir);
+        let (scale, runs) = fixture();
+        let layout = Layout { root: dir.join("sweeps") };
+        let mut copy = runs[1].clone();
+        copy.sweep = "u".into();
+        let jobs: Vec<_> = [runs[0].clone(), runs[1].clone(), copy]
+            .into_iter()
+            .map(|r| {
+                let d = layout.run(&r, &scale.name);
+                (r, &scale, dir.join("data"), d)
+            })
+            .collect();
+        let out = run_all(&hush, &jobs, 2, 1);
+        assert!(matches!(out[1], Outcome::Done(_)));
+        assert_eq!(out[2], Outcome::Same("t/b".into()));
+        // Two runs trained and evaluated, in any order; the third not.
+        let mut calls: Vec<String> =
+            std::fs::read_to_string(dir.join("calls")).unwrap().lines().map(String::from).collect();
+        calls.sort();
+        assert_eq!(calls, ["eval", "eval", "train", "train"]);
+        assert_eq!(std::fs::read_link(&jobs[2].3).unwrap(), Path::new("../../t/tiny/b"));
+        assert!(jobs[2].3.join("done.json").is_file());
+        // Next time the link is a complete run.
+        assert_eq!(run_all(&hush, &jobs, 1, 1), [Outcome::Skipped, Outcome::Skipped, Outcome::Skipped]);
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

@@ -261,7 +261,9 @@ pub fn run(args: &[String]) -> Result<()> {
             let dir = layout.run(run, &scale.name);
             let threads = std::env::var("RAYON_NUM_THREADS").ok().and_then(|t| t.parse().ok()).unwrap_or(cores);
             match exec::run_one(&hush, run, &scale, &dataset, &dir, threads) {
-                Outcome::Skipped => eprintln!("sweep: {}/{} is complete already", run.sweep, run.name),
+                Outcome::Skipped | Outcome::Same(_) => {
+                    eprintln!("sweep: {}/{} is complete already", run.sweep, run.name)
+                }
                 Outcome::Done(s) => eprintln!("sweep: {}/{} done in {s:.1} s", run.sweep, run.name),
                 Outcome::Failed(e) => return Err(format!("{}/{}: {e}", run.sweep, run.name)),
             }
