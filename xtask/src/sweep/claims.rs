@@ -341,15 +341,18 @@ pub fn claims(sweep: &str, results: &[RunResult]) -> Vec<Claim> {
                     let (gl, gh) = (gain(lo), gain(hi));
                     let d: Vec<f64> = gl.iter().zip(&gh).map(|(a, b)| a - b).collect();
                     let p = Paired::of(&d);
+                    let low_gain = mean(gl.iter().copied()).unwrap_or(f64::NAN);
+                    // Features that do not help at low spp leave nothing to "matter most" there.
+                    let verdict = if low_gain > 0.0 { p.direction() } else { Verdict::Inconclusive };
                     out.push(claim(
                         thesis,
                         format!(
-                            "PSNR gain of ann over n: {:.3} dB at {lo} spp, {:.3} dB at {hi} spp; gain at {lo} minus gain \
-                             at {hi}: {p}",
-                            mean(gl.iter().copied()).unwrap_or(f64::NAN),
+                            "PSNR gain of ann over n: {low_gain:.3} dB at {lo} spp, {:.3} dB at {hi} spp; gain at {lo} \
+                             minus gain at {hi}: {p}. Rule: the direction rule, inconclusive unless the gain at {lo} spp \
+                             is positive",
                             mean(gh.iter().copied()).unwrap_or(f64::NAN)
                         ),
-                        p.direction(),
+                        verdict,
                     ));
                 }
                 _ => out.push(claim(thesis, "needs runs `ann`, `n` at two spp or more".into(), Verdict::NotMeasured)),
@@ -461,6 +464,10 @@ mod tests {
         assert_eq!(claims[1].verdict, Verdict::NotMeasured);
         assert_eq!(claims[2].verdict, Verdict::Reproduced, "{:?}", claims[2]);
         assert!(claims[2].measured.contains("at 4 spp"), "{}", claims[2].measured);
+        // Features that hurt everywhere, less so at low spp: nothing to matter most.
+        let worse = result("ann", &[(4, 19.0), (64, 29.0), (4, 20.0), (64, 30.0), (4, 18.0), (64, 28.5)], &[]);
+        let n = result("n", &[(4, 20.0), (64, 31.0), (4, 21.0), (64, 32.0), (4, 19.0), (64, 30.5)], &[]);
+        assert_eq!(super::claims("features", &[n, worse])[2].verdict, Verdict::Inconclusive);
     }
 
     #[test]
