@@ -191,24 +191,54 @@ fn relative(from: &Path, to: &Path) -> PathBuf {
     out
 }
 
+/// Makes `alias` a relative symbolic link to the run folder `target`.
+fn link(alias: &Path, target: &Path) -> Result<()> {
+    let rel = relative(alias.parent().unwrap_or(Path::new("")), target);
+    alias
+        .parent()
+        .map_or(Ok(()), std::fs::create_dir_all)
+        .and_then(|()| symlink(&rel, alias))
+        .map_err(|e| format!("cannot link {} to {}: {e}", alias.display(), rel.display()))
+}
+
 /// Runs every `(run, scale, dataset, dir)` on `workers` threads, each `hush` with `RAYON_NUM_THREADS =
-/// threads`; prints a line per run and returns the outcomes in order. A run whose settings, seed, scale and
-/// dataset equal an earlier one's (the baseline recurs across sweeps) is not trained again: its folder
-/// becomes a symbolic link to the earlier run's, unless it exists already.
-pub fn run_all(hush: &Path, runs: &[(Run, &Scale, PathBuf, PathBuf)], workers: usize, threads: usize) -> Vec<Outcome> {
-    let key = |(run, scale, dataset, _): &(Run, &Scale, PathBuf, PathBuf)| {
+/// threads`; prints a line per run and returns the outcomes in order. A run whose folder does not exist yet
+/// and whose settings, seed, scale and dataset equal those of an earlier run here or of a complete run in
+/// `elsewhere` (other sweeps' runs and folders: the baseline recurs across sweeps) is not trained again: its
+/// folder becomes a symbolic link to that run's.
+pub fn run_all(
+    hush: &Path,
+    runs: &[(Run, &Scale, PathBuf, PathBuf)],
+    elsewhere: &[(Run, PathBuf)],
+    workers: usize,
+    threads: usize,
+) -> Vec<Outcome> {
+    let key = |run: &Run, scale: &Scale, dataset: &Path| {
         format!("{}|{}|{}|{}", Value::Object(run.train.clone()), run.seed, scale.name, dataset.display())
     };
-    let mut first = std::collections::HashMap::new();
-    let (mut order, mut aliases) = (Vec::new(), Vec::new());
-    for (i, job) in runs.iter().enumerate() {
-        match first.get(&key(job)) {
-            Some(&p) if std::fs::symlink_metadata(&job.3).is_err() => aliases.push((i, p)),
-            _ => {
-                first.entry(key(job)).or_insert(i);
-                order.push(i);
+    let mut first: std::collections::HashMap<String, usize> = std::collections::HashMap::new();
+    let mut order = Vec::new();
+    let mut aliases: Vec<(usize, PathBuf, String, Option<usize>)> = Vec::new();
+    for (i, (run, scale, dataset, dir)) in runs.iter().enumerate() {
+        let k = key(run, scale, dataset);
+        if std::fs::symlink_metadata(dir).is_err() {
+            if let Some(&p) = first.get(&k) {
+                aliases.push((i, runs[p].3.clone(), format!("{}/{}", runs[p].0.sweep, runs[p].0.name), Some(p)));
+                continue;
+            }
+            let done = elsewhere.iter().find(|(r, d)| {
+                key(r, scale, dataset) == k
+                    && d != dir
+                    && d.join("done.json").is_file()
+                    && !runs.iter().any(|j| &j.3 == d)
+            });
+            if let Some((r, d)) = done {
+                aliases.push((i, d.clone(), format!("{}/{}", r.sweep, r.name), None));
+                continue;
             }
         }
+        first.entry(k).or_insert(i);
+        order.push(i);
     }
     let next = AtomicUsize::new(0);
     let outcomes = Mutex::new(vec![Outcome::Skipped; runs.len()]);
@@ -236,18 +266,13 @@ pub fn run_all(hush: &Path, runs: &[(Run, &Scale, PathBuf, PathBuf)], workers: u
         }
     });
     let mut outcomes = outcomes.into_inner().expect("no worker panicked");
-    for (i, p) in aliases {
-        let (alias, target) = (&runs[i].3, &runs[p].3);
-        let outcome = match &outcomes[p] {
-            Outcome::Failed(e) => Outcome::Failed(e.clone()),
-            _ => {
-                let link = relative(alias.parent().unwrap_or(Path::new("")), target);
-                let made = alias.parent().map_or(Ok(()), std::fs::create_dir_all).and_then(|()| symlink(&link, alias));
-                match made {
-                    Ok(()) => Outcome::Same(format!("{}/{}", runs[p].0.sweep, runs[p].0.name)),
-                    Err(e) => Outcome::Failed(format!("cannot link {} to {}: {e}", alias.display(), link.display())),
-                }
-            }
+    for (i, target, name, primary) in aliases {
+        let outcome = match primary.map(|p| &outcomes[p]) {
+            Some(Outcome::Failed(e)) => Outcome::Failed(e.clone()),
+            _ => match link(&runs[i].3, &target) {
+                Ok(()) => Outcome::Same(name),
+                Err(e) => Outcome::Failed(e),
+            },
         };
         report(i, &outcome);
         outcomes[i] = outcome;
@@ -330,7 +355,7 @@ mod tests {
                 (r, &scale, dir.join("data"), d)
             })
             .collect();
-        let out = run_all(&hush, &jobs, 2, 1);
+        let out = run_all(&hush, &jobs, &[], 2, 1);
         assert!(matches!(out[1], Outcome::Done(_)));
         assert_eq!(out[2], Outcome::Same("t/b".into()));
         // Two runs trained and evaluated, in any order; the third not.
@@ -341,7 +366,15 @@ mod tests {
         assert_eq!(std::fs::read_link(&jobs[2].3).unwrap(), Path::new("../../t/tiny/b"));
         assert!(jobs[2].3.join("done.json").is_file());
         // Next time the link is a complete run.
-        assert_eq!(run_all(&hush, &jobs, 1, 1), [Outcome::Skipped, Outcome::Skipped, Outcome::Skipped]);
+        assert_eq!(run_all(&hush, &jobs, &[], 1, 1), [Outcome::Skipped, Outcome::Skipped, Outcome::Skipped]);
+        // A later invocation of another sweep links to the complete run of an earlier one.
+        let mut other = runs[0].clone();
+        other.sweep = "v".into();
+        let dir_v = layout.run(&other, &scale.name);
+        let elsewhere = vec![(runs[0].clone(), jobs[0].3.clone())];
+        let out = run_all(&hush, &[(other, &scale, dir.join("data"), dir_v.clone())], &elsewhere, 1, 1);
+        assert_eq!(out, [Outcome::Same("t/a".into())]);
+        assert_eq!(std::fs::read_link(&dir_v).unwrap(), Path::new("../../t/tiny/a"));
         let _ = std::fs::remove_dir_all(&dir);
     }
 
@@ -392,7 +425,7 @@ mod tests {
         assert!(matches!(run_one(&hush, &a.0, a.1, &a.2, &a.3, 1), Outcome::Done(_)));
         std::fs::write(dir.join("calls"), "").unwrap();
         std::fs::write(dir.join("fail"), "").unwrap();
-        let out = run_all(&hush, &jobs, 2, 1);
+        let out = run_all(&hush, &jobs, &[], 2, 1);
         assert_eq!(out[0], Outcome::Skipped);
         let Outcome::Failed(e) = &out[1] else { panic!("{out:?}") };
         assert!(e.contains("`hush eval` exited with 3") && e.contains("boom"), "{e}");
@@ -402,7 +435,7 @@ mod tests {
         // Re-running re-does only `b`, and only its evaluation: its training had finished.
         std::fs::remove_file(dir.join("fail")).unwrap();
         std::fs::write(dir.join("calls"), "").unwrap();
-        let out = run_all(&hush, &jobs, 1, 1);
+        let out = run_all(&hush, &jobs, &[], 1, 1);
         assert_eq!(out[0], Outcome::Skipped);
         assert!(matches!(out[1], Outcome::Done(_)));
         assert_eq!(calls(), "eval\n");
@@ -411,7 +444,7 @@ mod tests {
         assert_eq!(done["commands"][0]["args"][0], "train");
         assert_eq!(done["variants"]["loss"], "b");
         std::fs::write(dir.join("calls"), "").unwrap();
-        assert_eq!(run_all(&hush, &jobs, 2, 1), [Outcome::Skipped, Outcome::Skipped]);
+        assert_eq!(run_all(&hush, &jobs, &[], 2, 1), [Outcome::Skipped, Outcome::Skipped]);
         assert_eq!(calls(), "");
         let _ = std::fs::remove_dir_all(&dir);
     }

@@ -282,7 +282,16 @@ pub fn run(args: &[String]) -> Result<()> {
             );
             let jobs: Vec<_> =
                 runs.iter().map(|r| (r.clone(), &scale, dataset.clone(), layout.run(r, &scale.name))).collect();
-            let outcomes = exec::run_all(&hush, &jobs, workers, threads);
+            // Complete runs of every sweep at this scale, to link runs with the same settings to.
+            let elsewhere: Vec<(Run, PathBuf)> = spec::load_sweeps(&defs, "all")?
+                .iter()
+                .flat_map(|s| s.runs(&scale))
+                .map(|r| {
+                    let dir = layout.run(&r, &scale.name);
+                    (r, dir)
+                })
+                .collect();
+            let outcomes = exec::run_all(&hush, &jobs, &elsewhere, workers, threads);
             collect(&sweeps, &scale, &runs, &layout)?;
             let failed: Vec<String> = runs
                 .iter()
