@@ -357,6 +357,26 @@ pub fn claims(sweep: &str, results: &[RunResult]) -> Vec<Claim> {
                 }
                 _ => out.push(claim(thesis, "needs runs `ann`, `n` at two spp or more".into(), Verdict::NotMeasured)),
             }
+            let times: Vec<(&str, Option<f64>)> = ["n", "ann", "dsnn"].map(|f| (f, g.seconds_per_epoch(f))).into();
+            let thesis = "The feature sets train about equally fast: only the input layer changes (§7.4)";
+            match times.iter().map(|t| t.1).collect::<Option<Vec<f64>>>() {
+                Some(t) => {
+                    let (lo, hi) = t.iter().fold((f64::MAX, f64::MIN), |(a, b), &x| (a.min(x), b.max(x)));
+                    let shown: Vec<String> =
+                        times.iter().map(|(f, s)| format!("{f} {:.2}", s.unwrap_or(f64::NAN))).collect();
+                    out.push(claim(
+                        thesis,
+                        format!(
+                            "s/epoch: {} (slowest ×{:.3} the fastest). Rule: reproduced if within {:.0}%",
+                            shown.join(", "),
+                            hi / lo,
+                            100.0 * TIME_MARGIN
+                        ),
+                        if hi <= lo * (1.0 + TIME_MARGIN) { Verdict::Reproduced } else { Verdict::Refuted },
+                    ));
+                }
+                None => out.push(claim(thesis, "needs runs `n`, `ann`, `dsnn`".into(), Verdict::NotMeasured)),
+            }
             out
         }
         "architecture" => {
