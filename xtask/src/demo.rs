@@ -4,9 +4,19 @@
 //! narrow U-Net on all but one perspective → denoise the held-out one → `target/demo/report.md`.
 //! Fails loudly unless the denoised image beats the noisy one in PSNR at every spp.
 
+use std::path::Path;
 use std::process::Command;
 
 use crate::util::{Result, build_hush, ensure_vulkan, project_root, read_json, release, spawn, target_dir};
+
+/// `hush train` with the demo's settings; `cargo xtask bench train` measures the same.
+pub fn train_command(hush: &Path, dataset: &Path, run: &Path, steps: u32) -> Command {
+    let mut cmd = Command::new(hush);
+    cmd.arg("train").arg("--dataset").arg(dataset).arg("--out").arg(run);
+    cmd.args(["--features", "color,albedo,normal", "--spp", "4,16", "--batch", "4", "--crop", "64"]);
+    cmd.args(["--width", "0.25", "--lr", "1e-3", "--loss", "mix", "--seed", "1", "--steps", &steps.to_string()]);
+    cmd
+}
 
 pub fn run(args: &[String]) -> Result<()> {
     ensure_vulkan()?;
@@ -30,16 +40,7 @@ pub fn run(args: &[String]) -> Result<()> {
             .args(["--views", "6", "--test-views", "1", "--spp", "4,16", "--ref-spp", "256"])
             .args(["--aux-spp", "32", "--size", "128", "--seed", "1"]),
     )?;
-    spawn(
-        Command::new(&hush)
-            .arg("train")
-            .arg("--dataset")
-            .arg(&dataset)
-            .arg("--out")
-            .arg(&run_dir)
-            .args(["--features", "color,albedo,normal", "--spp", "4,16", "--steps", "1000"])
-            .args(["--batch", "4", "--crop", "64", "--width", "0.25", "--lr", "1e-3", "--loss", "mix", "--seed", "1"]),
-    )?;
+    spawn(&mut train_command(&hush, &dataset, &run_dir, 1000))?;
     spawn(
         Command::new(&hush)
             .arg("eval")

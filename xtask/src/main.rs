@@ -2,6 +2,7 @@
 //! their JSON; it links neither Candle nor wgpu.
 
 mod bench;
+mod bench_net;
 mod demo;
 mod mitsuba;
 mod sweep;
@@ -19,6 +20,10 @@ tasks:
                              (512², max_depth 8), hush against Mitsuba 3 when it is installed
   bench dataset [--size N] [--views N]
                              perspectives per hour of `hush dataset` (default settings) on the Cornell box
+  bench net [--release]      U-Net inference at 512² against official OIDN, a training step's GFLOP/s against
+                             the machine's GEMM rate, peak memory, for 1 and 2 threads
+  bench train [--release] [--steps N]
+                             steps per second and the loader's share of `hush train` (the demo's settings)
   mitsuba setup              install Mitsuba 3 (PyPI) into target/mitsuba-venv and verify it renders
   mitsuba references         re-render the references of data/tests/mitsuba with Mitsuba 3
 ";

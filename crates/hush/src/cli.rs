@@ -2,6 +2,7 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
 
+pub use crate::bench_cmd::BenchArgs;
 pub use crate::dataset_cmd::DatasetArgs;
 pub use crate::train_cmd::TrainArgs;
 
@@ -29,6 +30,9 @@ pub enum Command {
     Denoise(DenoiseArgs),
     /// Evaluate models against the noisy input on a dataset's test split.
     Eval(EvalArgs),
+    /// Measurements behind `cargo xtask bench net` (JSON on stdout).
+    #[command(hide = true)]
+    Bench(BenchArgs),
 }
 
 /// Camera and image overrides shared by `render` and `dataset`.
