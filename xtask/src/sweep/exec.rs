@@ -136,13 +136,43 @@ fn exec(hush: &Path, args: &[String], log: &Path, threads: usize) -> Result<(i32
 
 /// Trains and evaluates one run in `dir` (skipping `hush train` when a previous attempt finished it),
 /// then writes `done.json`.
+/// A run that another process (a second sweep, a Slurm task) holds the lock of is left to it.
 pub fn run_one(hush: &Path, run: &Run, scale: &Scale, dataset: &Path, dir: &Path, threads: usize) -> Outcome {
     if is_done(run, dir) {
         return Outcome::Skipped;
     }
-    match run_inner(hush, run, scale, dataset, dir, threads) {
+    let lock = match lock(dir) {
+        Ok(Some(lock)) => lock,
+        Ok(None) => return Outcome::Failed(format!("another process is running it ({} is locked)", dir.display())),
+        Err(e) => return Outcome::Failed(e),
+    };
+    // Whoever held the lock before may have finished it.
+    if is_done(run, dir) {
+        return Outcome::Skipped;
+    }
+    let outcome = match run_inner(hush, run, scale, dataset, dir, threads) {
         Ok(s) => Outcome::Done(s),
         Err(e) => Outcome::Failed(e),
+    };
+    drop(lock);
+    outcome
+}
+
+/// An exclusive lock on `dir/.lock` (released when the file closes, also when the process dies), or
+/// `None` when another process holds it.
+fn lock(dir: &Path) -> Result<Option<File>> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let path = dir.join(".lock");
+    let file = File::options()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(&path)
+        .map_err(|e| format!("{}: {e}", path.display()))?;
+    match file.try_lock() {
+        Ok(()) => Ok(Some(file)),
+        Err(std::fs::TryLockError::WouldBlock) => Ok(None),
+        Err(std::fs::TryLockError::Error(e)) => Err(format!("{}: {e}", path.display())),
     }
 }
 
@@ -328,6 +358,21 @@ mod tests {
         std::fs::write(&exe, script).unwrap();
         std::fs::set_permissions(&exe, std::fs::Permissions::from_mode(0o755)).unwrap();
         exe
+    }
+
+    #[test]
+    fn a_locked_run_is_left_to_the_process_holding_the_lock() {
+        let dir = scratch("lock");
+        let (scale, runs) = fixture();
+        let run_dir = dir.join("r");
+        let held = lock(&run_dir).unwrap().expect("free");
+        assert!(lock(&run_dir).unwrap().is_none());
+        let out = run_one(Path::new("/nonexistent/hush"), &runs[0], &scale, &dir, &run_dir, 1);
+        let Outcome::Failed(e) = out else { panic!("{out:?}") };
+        assert!(e.contains("another process is running it"), "{e}");
+        drop(held);
+        assert!(lock(&run_dir).unwrap().is_some());
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
