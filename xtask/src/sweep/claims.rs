@@ -224,16 +224,21 @@ pub fn claims(sweep: &str, results: &[RunResult]) -> Vec<Claim> {
                     out.push(claim(thesis, format!("{}: no test loss logged", r.run.name), Verdict::NotMeasured));
                     continue;
                 };
-                // The jitter of the test loss: median absolute change between consecutive evaluations.
-                let mut steps: Vec<f64> = tested.windows(2).map(|w| (w[1].1 - w[0].1).abs()).collect();
+                // The jitter of the test loss: the median absolute second difference of consecutive evaluations
+                // (zero for a straight trend, so a steady fall or rise is not mistaken for noise).
+                let mut steps: Vec<f64> = tested.windows(3).map(|w| (w[2].1 - 2.0 * w[1].1 + w[0].1).abs()).collect();
                 steps.sort_by(f64::total_cmp);
                 let jitter = steps.get(steps.len() / 2).copied().unwrap_or(f64::NAN);
                 let rise = last - best;
                 let gap = r.last_tested().map(|(_, tr, te)| te - tr).unwrap_or(f64::NAN);
+                // How much the test loss still fell over the last fifth of the run.
+                let late = tested.iter().find(|(e, _)| *e as f64 >= 0.8 * last_epoch as f64).map_or(last, |t| t.1);
+                let still_falling = late - last;
                 let verdict = if tested.len() < 3 {
                     Verdict::Inconclusive
                 } else if best_epoch == last_epoch {
-                    Verdict::Refuted
+                    // Flat at its best: converged without overfitting. Still falling: too short to tell.
+                    if still_falling <= 2.0 * jitter { Verdict::Refuted } else { Verdict::Inconclusive }
                 } else if (best_epoch as f64) < 0.8 * last_epoch as f64 && rise > 2.0 * jitter {
                     Verdict::Reproduced
                 } else {
@@ -243,9 +248,10 @@ pub fn claims(sweep: &str, results: &[RunResult]) -> Vec<Claim> {
                     thesis,
                     format!(
                         "{}: best test loss {best:.4} at epoch {best_epoch} of {last_epoch}; final {last:.4} (rise {rise:+.4}, \
-                         2× median jitter {:.4}); generalization gap at the end {gap:+.4}. Rule: reproduced if the best \
-                         epoch is before 80% of the run and the rise exceeds twice the jitter; refuted if the last epoch \
-                         is the best",
+                         fall over the last fifth {still_falling:+.4}, 2× jitter {:.4}); generalization gap at the \
+                         end {gap:+.4}. Rule: reproduced if the best epoch is before 80% of the run and the rise exceeds \
+                         twice the jitter; refuted if the last epoch is the best and the loss fell less than twice the \
+                         jitter over the last fifth (converged, no overfitting); inconclusive while it still falls",
                         r.run.name,
                         2.0 * jitter
                     ),
@@ -494,9 +500,14 @@ mod tests {
     fn overfitting_is_read_from_the_test_loss_curve() {
         let turn = [(1, 0.5, 0.5), (2, 0.3, 0.3), (3, 0.2, 0.31), (4, 0.1, 0.36), (5, 0.05, 0.4), (6, 0.04, 0.45)];
         assert_eq!(claims("epochs", &[result("base", &[], &turn)])[0].verdict, Verdict::Reproduced);
-        let falling = [(1, 0.5, 0.5), (2, 0.4, 0.4), (3, 0.3, 0.3), (4, 0.2, 0.2)];
+        // Still falling at the end: too short to tell.
+        let falling = [(1, 0.5, 0.5), (2, 0.4, 0.4), (3, 0.3, 0.3), (4, 0.2, 0.2), (5, 0.1, 0.1)];
         let c = claims("epochs", &[result("base", &[], &falling)]);
-        assert_eq!(c[0].verdict, Verdict::Refuted);
-        assert!(c[0].measured.contains("best test loss 0.2000 at epoch 4 of 4"), "{}", c[0].measured);
+        assert_eq!(c[0].verdict, Verdict::Inconclusive);
+        assert!(c[0].measured.contains("best test loss 0.1000 at epoch 5 of 5"), "{}", c[0].measured);
+        // Flat at its best over the last fifth: converged without overfitting.
+        let flat = [(2, 0.5, 0.5), (4, 0.3, 0.3), (6, 0.25, 0.2), (8, 0.2, 0.2), (10, 0.2, 0.2), (12, 0.2, 0.2)];
+        let flat: Vec<_> = flat.iter().map(|&(e, tr, te)| (e, tr, te - 1e-4 * e as f64)).collect();
+        assert_eq!(claims("epochs", &[result("base", &[], &flat)])[0].verdict, Verdict::Refuted);
     }
 }
