@@ -317,12 +317,17 @@ pub fn claims(sweep: &str, results: &[RunResult]) -> Vec<Claim> {
                         }
                     }
                 }
-                out.push(claim(
-                    &format!("Learning-rate schedules change {opt} little (figure {fig})"),
+                let measured = if verdict == Verdict::NotMeasured {
+                    format!("needs runs `{opt}-const`, `{opt}-cosine`, `{opt}-sgdr`")
+                } else {
                     format!(
                         "PSNR (dB) {}. Rule: reproduced if every |d̄| + 2·SE < {PSNR_MARGIN_DB} dB",
                         parts.join("; ")
-                    ),
+                    )
+                };
+                out.push(claim(
+                    &format!("Learning-rate schedules change {opt} little (figure {fig})"),
+                    measured,
                     verdict,
                 ));
             }

@@ -205,6 +205,7 @@ fn run_inner(hush: &Path, run: &Run, scale: &Scale, dataset: &Path, dir: &Path, 
         "train_flags": run.train,
         "hush": hush.display().to_string(),
         "rayon_threads": threads,
+        "load_average": crate::util::load_average(),
         "commands": commands,
         "seconds": start.elapsed().as_secs_f64(),
     });

@@ -270,7 +270,9 @@ pub fn claims_section(claims: &[Claim]) -> String {
          d̄ is the mean of the differences (positive = the thesis's direction), SE their standard error. \
          Reproduced when d̄ > 2·SE, refuted when d̄ < −2·SE, inconclusive otherwise or with fewer than 2 pairs. \
          \"Little difference\" claims: reproduced when |d̄| + 2·SE < {PSNR_MARGIN_DB} dB, refuted when |d̄| − 2·SE > \
-         {PSNR_MARGIN_DB} dB. Rows of one view at several spp are not independent: SE is optimistic.\n"
+         {PSNR_MARGIN_DB} dB. Rows of one view at several spp are not independent: SE is optimistic. Timing claims \
+         compare wall seconds per epoch, which on a shared machine are only comparable under equal load (each run's \
+         `done.json` records the load average).\n"
     );
     let _ = writeln!(md, "| sweep | thesis | measured | verdict |");
     let _ = writeln!(md, "|---|---|---|---|");
