@@ -11,18 +11,12 @@
 //! `train`: steps per second and the loader's share of `hush train` in its default configuration (the
 //! demo's settings) on the demo's dataset, rendered first when missing.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
+use crate::baselines;
 use crate::util::{Result, build_hush, ensure_vulkan, load_average, output, project_root, release, spawn, target_dir};
 use crate::util::{read_json, write_json};
-
-/// The venv with official OIDN (pyoidn) and the Python baselines.
-fn baselines_python() -> PathBuf {
-    target_dir().join("baselines-venv/bin/python")
-}
-
-const BASELINES_SETUP: &str = "cargo xtask baselines setup";
 
 fn hush_json(hush: &Path, threads: Option<usize>, args: &[&str]) -> Result<serde_json::Value> {
     let mut cmd = Command::new(hush);
@@ -57,15 +51,15 @@ print(json.dumps({"what": "inference", "implementation": "pyoidn " + getattr(pyo
 "#;
 
 fn oidn(size: usize, runs: usize) -> serde_json::Value {
-    let python = baselines_python();
+    let python = baselines::venv_python();
     if !python.is_file() {
-        return serde_json::json!({ "skipped": format!("{} not found", python.display()), "install": BASELINES_SETUP });
+        return serde_json::json!({ "skipped": format!("{} not found", python.display()), "install": baselines::SETUP });
     }
     let result = output(Command::new(&python).args(["-c", OIDN_SCRIPT, &size.to_string(), &runs.to_string()]))
         .and_then(|text| {
             serde_json::from_str(text.trim()).map_err(|e| format!("the OIDN timing printed no JSON: {e}"))
         });
-    result.unwrap_or_else(|e| serde_json::json!({ "skipped": e, "install": BASELINES_SETUP }))
+    result.unwrap_or_else(|e| serde_json::json!({ "skipped": e, "install": baselines::SETUP }))
 }
 
 fn ratio(a: &serde_json::Value, b: &serde_json::Value) -> serde_json::Value {
