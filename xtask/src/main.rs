@@ -7,6 +7,7 @@ mod bench_net;
 mod demo;
 mod eval;
 mod mitsuba;
+mod sweep;
 mod test;
 mod util;
 
@@ -32,7 +33,8 @@ tasks:
   baselines setup            install OIDN 2.5.1, BM3D, flip-evaluator, scikit-image (PyPI) into target/baselines-venv
   baselines check            run BM3D and OIDN through hush-eval on a Cornell box crop; fail unless both help
   mitsuba setup              install Mitsuba 3 (PyPI) into target/mitsuba-venv and verify it renders
-  mitsuba references         re-render the references of data/tests/mitsuba with Mitsuba 3";
+  mitsuba references         re-render the references of data/tests/mitsuba with Mitsuba 3
+";
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -43,7 +45,8 @@ fn main() -> ExitCode {
         Some("test") => test::run(&args[1..]),
         Some("mitsuba") => mitsuba::run(&args[1..]),
         Some("baselines") => baselines::run(&args[1..]),
-        _ => Err(USAGE.to_string()),
+        Some("sweep") => sweep::run(&args[1..]),
+        _ => Err(format!("{USAGE}{}", sweep::USAGE)),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,332 @@
+//! `cargo xtask sweep <name|all>`: the thesis's hyperparameter study (chapter 7) as resumable runs of
+//! `hush train` + `hush eval`, locally on N workers or as a Slurm job array, aggregated into
+//! `target/sweeps/<name>/<scale>/report.md` with each thesis claim reproduced, refuted or inconclusive.
+//!
+//! Definitions: `data/sweeps/scales.toml` and one `data/sweeps/<name>.toml` per sweep (see `spec`).
+
+mod claims;
+mod exec;
+mod plot;
+mod report;
+mod results;
+mod slurm;
+mod slurm_selftest;
+mod spec;
+
+use std::path::{Path, PathBuf};
+
+use exec::{Layout, Outcome};
+use results::RunResult;
+use spec::{Run, Scale, Sweep};
+
+use crate::util::{Result, build_hush, ensure_vulkan, release, target_dir};
+
+pub const USAGE: &str =
+    "  sweep <name|all> [--scale tiny|small|thesis] [--jobs N] [--release] [--hush PATH] [--out DIR]
+             [--list | --prepare | --run I | --emit slurm [--cpus-per-task N] | --collect]
+                             the thesis's hyperparameter sweeps (data/sweeps/<name>.toml): resumable runs of
+                             hush train + hush eval on N workers, or a Slurm job array; the report is
+                             target/sweeps/<name>/<scale>/report.md
+  sweep slurm-selftest       a single-node Slurm on localhost (installs slurm-wlm) runs the tiny loss sweep";
+
+/// `RAYON_NUM_THREADS` of one worker's `hush`, and so the default worker count (cores / this). On a
+/// busy 2-core machine `sweep all --scale tiny` took 35 and 42 s with 2 workers of 1 thread against 75 and 95 s
+/// with 1 worker of 2 threads: a run's process start, loading and evaluation are serial, and Candle's
+/// threads gain little at these sizes.
+const THREADS_PER_WORKER: usize = 1;
+
+#[derive(Debug)]
+struct Options {
+    name: String,
+    scale: String,
+    jobs: Option<usize>,
+    hush: Option<PathBuf>,
+    /// The sweeps' root folder [default: target/sweeps].
+    out: Option<PathBuf>,
+    cpus_per_task: Option<usize>,
+    release: bool,
+    action: Action,
+}
+
+#[derive(Debug, PartialEq)]
+enum Action {
+    Sweep,
+    List,
+    Prepare,
+    Run(usize),
+    EmitSlurm,
+    Collect,
+}
+
+fn parse(args: &[String]) -> Result<Options> {
+    let usage = || format!("usage: cargo xtask {}", USAGE.trim_start());
+    let mut it = args.iter();
+    let name = it.next().filter(|n| !n.starts_with("--")).ok_or_else(usage)?.clone();
+    let mut o = Options {
+        name,
+        scale: "tiny".into(),
+        jobs: None,
+        hush: None,
+        out: None,
+        cpus_per_task: None,
+        release: release(args),
+        action: Action::Sweep,
+    };
+    let set = |o: &mut Options, a: Action| {
+        if o.action != Action::Sweep {
+            return Err(format!("give only one of --list, --prepare, --run, --emit, --collect\n{}", usage()));
+        }
+        o.action = a;
+        Ok(())
+    };
+    while let Some(a) = it.next() {
+        let mut value = || it.next().cloned().ok_or_else(|| format!("{a} needs a value\n{}", usage()));
+        match a.as_str() {
+            "--scale" => o.scale = value()?,
+            "--jobs" => {
+                let v = value()?;
+                o.jobs = Some(v.parse().ok().filter(|&n| n > 0).ok_or(format!("--jobs {v}: give a number ≥ 1"))?);
+            }
+            "--hush" => o.hush = Some(PathBuf::from(value()?)),
+            "--out" => o.out = Some(PathBuf::from(value()?)),
+            "--cpus-per-task" => {
+                let v = value()?;
+                let n = v.parse().ok().filter(|&n| n > 0).ok_or(format!("--cpus-per-task {v}: give a number ≥ 1"))?;
+                o.cpus_per_task = Some(n);
+            }
+            "--release" => {}
+            "--list" => set(&mut o, Action::List)?,
+            "--prepare" => set(&mut o, Action::Prepare)?,
+            "--collect" => set(&mut o, Action::Collect)?,
+            "--run" => {
+                let v = value()?;
+                let i = v.parse().map_err(|_| format!("--run {v}: give a run index (see --list)"))?;
+                set(&mut o, Action::Run(i))?
+            }
+            "--emit" => match value()?.as_str() {
+                "slurm" => set(&mut o, Action::EmitSlurm)?,
+                other => return Err(format!("--emit {other}: only `slurm` is supported")),
+            },
+            other => return Err(format!("unknown option {other}\n{}", usage())),
+        }
+    }
+    Ok(o)
+}
+
+/// Copies `exe` to `bin/<name>` (temp + rename), so that rebuilding the workspace while a sweep runs
+/// never swaps the binary under its workers.
+fn stable_copy(exe: &Path, bin: &Path, name: &str) -> Result<PathBuf> {
+    std::fs::create_dir_all(bin).map_err(|e| format!("{}: {e}", bin.display()))?;
+    let dest = bin.join(name);
+    let tmp = bin.join(format!(".{name}.tmp"));
+    std::fs::copy(exe, &tmp).map_err(|e| format!("copying {} to {}: {e}", exe.display(), tmp.display()))?;
+    std::fs::rename(&tmp, &dest).map_err(|e| format!("{}: {e}", dest.display()))?;
+    Ok(dest)
+}
+
+fn hush(o: &Options, layout: &Layout) -> Result<PathBuf> {
+    match &o.hush {
+        Some(p) if p.is_file() => Ok(p.clone()),
+        Some(p) => Err(format!("--hush {}: no such file", p.display())),
+        None => stable_copy(&build_hush(o.release)?, &layout.root.join("bin"), "hush"),
+    }
+}
+
+fn collect(sweeps: &[Sweep], scale: &Scale, runs: &[Run], layout: &Layout) -> Result<()> {
+    let mut all = Vec::new();
+    let results: Vec<RunResult> = runs.iter().map(|r| RunResult::load(r, &layout.run(r, &scale.name))).collect();
+    for sweep in sweeps {
+        let mine: Vec<RunResult> = results.iter().filter(|r| r.run.sweep == sweep.name).cloned().collect();
+        let dir = layout.sweep(&sweep.name, &scale.name);
+        let claims = report::write(sweep, scale, &mine, &dir)?;
+        println!("report: {}", dir.join("report.md").display());
+        all.push((sweep.name.clone(), claims));
+    }
+    if sweeps.len() > 1 {
+        let dir = layout.sweep("all", &scale.name);
+        report::write_all(scale, &all, &results, &dir)?;
+        println!("report: {}", dir.join("report.md").display());
+    }
+    Ok(())
+}
+
+/// Writes the Slurm job-array script of the sweep and returns its path.
+fn emit_slurm(o: &Options, scale: &Scale, runs: usize, layout: &Layout, hush: &Path) -> Result<PathBuf> {
+    let exe = std::env::current_exe().map_err(|e| format!("cannot find the xtask executable: {e}"))?;
+    let xtask = stable_copy(&exe, &layout.root.join("bin"), "xtask")?;
+    let dir = layout.sweep(&o.name, &scale.name).join("slurm");
+    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    // flock creates the lock file but not its folder.
+    let data = layout.root.join("data");
+    std::fs::create_dir_all(&data).map_err(|e| format!("{}: {e}", data.display()))?;
+    let lock = data.join(format!("{}.lock", scale.name));
+    let script = slurm::sbatch(&slurm::Job {
+        sweep: &o.name,
+        scale: &scale.name,
+        runs,
+        xtask: &xtask,
+        hush,
+        dir: &dir,
+        cpus_per_task: o.cpus_per_task.unwrap_or(THREADS_PER_WORKER),
+        data_lock: &lock,
+        out: &layout.root,
+    });
+    let path = dir.join("sweep.sbatch");
+    std::fs::write(&path, script).map_err(|e| format!("{}: {e}", path.display()))?;
+    Ok(path)
+}
+
+/// `sweep slurm-selftest`: the tiny `loss` sweep as a job array on a single-node Slurm started here.
+fn slurm_selftest(mut o: Options) -> Result<()> {
+    let root = o.out.clone().unwrap_or_else(|| target_dir().join("sweeps").join("slurm-selftest"));
+    let layout = Layout { root: root.join("sweeps") };
+    (o.name, o.scale) = ("loss".into(), "tiny".into());
+    let defs = spec::sweeps_dir();
+    let scale = spec::load_scale(&defs, &o.scale)?;
+    let sweeps = spec::load_sweeps(&defs, &o.name)?;
+    let runs: Vec<Run> = sweeps.iter().flat_map(|s| s.runs(&scale)).collect();
+    ensure_vulkan()?;
+    let hush = hush(&o, &layout)?;
+    // Start from no runs, so that the array really trains and evaluates them all (the dataset stays).
+    let sweep_dir = layout.root.join(&o.name);
+    if sweep_dir.exists() {
+        std::fs::remove_dir_all(&sweep_dir).map_err(|e| format!("cannot clear {}: {e}", sweep_dir.display()))?;
+    }
+    let script = emit_slurm(&o, &scale, runs.len(), &layout, &hush)?;
+    let (daemons, conf) = slurm_selftest::start(&root.join("slurm"))?;
+    let start = std::time::Instant::now();
+    crate::util::spawn(std::process::Command::new("sbatch").arg("--wait").arg(&script).env("SLURM_CONF", &conf))?;
+    let seconds = start.elapsed().as_secs_f64();
+    drop(daemons);
+    let missing: Vec<&str> = runs
+        .iter()
+        .filter(|r| !layout.run(r, &scale.name).join("done.json").is_file())
+        .map(|r| r.name.as_str())
+        .collect();
+    if !missing.is_empty() {
+        return Err(format!(
+            "the Slurm array left runs unfinished: {}; see {}",
+            missing.join(", "),
+            script.with_file_name("slurm-*.out").display()
+        ));
+    }
+    collect(&sweeps, &scale, &runs, &layout)?;
+    println!("slurm-selftest: {} array tasks completed every run in {seconds:.1} s", runs.len());
+    Ok(())
+}
+
+pub fn run(args: &[String]) -> Result<()> {
+    let o = parse(args)?;
+    if o.name == "slurm-selftest" {
+        return slurm_selftest(o);
+    }
+    let defs = spec::sweeps_dir();
+    let scale = spec::load_scale(&defs, &o.scale)?;
+    let sweeps = spec::load_sweeps(&defs, &o.name)?;
+    let runs: Vec<Run> = sweeps.iter().flat_map(|s| s.runs(&scale)).collect();
+    let layout = Layout { root: o.out.clone().unwrap_or_else(|| target_dir().join("sweeps")) };
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let workers = o.jobs.unwrap_or((cores / THREADS_PER_WORKER).max(1));
+    let threads = (cores / workers).max(1);
+
+    match o.action {
+        Action::List => {
+            for (i, r) in runs.iter().enumerate() {
+                println!("{i:4}  {}/{}  {}", r.sweep, r.name, spec::flags(&r.train).join(" "));
+            }
+            Ok(())
+        }
+        Action::Collect => collect(&sweeps, &scale, &runs, &layout),
+        Action::Prepare => {
+            ensure_vulkan()?;
+            exec::prepare_dataset(&hush(&o, &layout)?, &scale, &layout).map(drop)
+        }
+        Action::EmitSlurm => {
+            let script = emit_slurm(&o, &scale, runs.len(), &layout, &hush(&o, &layout)?)?;
+            println!("{}\nsubmit: sbatch {}", script.display(), script.display());
+            println!("then:   cargo xtask sweep {} --scale {} --collect", o.name, scale.name);
+            Ok(())
+        }
+        Action::Run(i) => {
+            let run = runs.get(i).ok_or_else(|| {
+                format!(
+                    "--run {i}: `{}` has {} runs (0 to {}); see --list",
+                    o.name,
+                    runs.len(),
+                    runs.len().saturating_sub(1)
+                )
+            })?;
+            let hush = hush(&o, &layout)?;
+            let dataset = exec::prepare_dataset(&hush, &scale, &layout)?;
+            let dir = layout.run(run, &scale.name);
+            let threads = std::env::var("RAYON_NUM_THREADS").ok().and_then(|t| t.parse().ok()).unwrap_or(cores);
+            match exec::run_one(&hush, run, &scale, &dataset, &dir, threads) {
+                Outcome::Skipped | Outcome::Same(_) => {
+                    eprintln!("sweep: {}/{} is complete already", run.sweep, run.name)
+                }
+                Outcome::Done(s) => eprintln!("sweep: {}/{} done in {s:.1} s", run.sweep, run.name),
+                Outcome::Failed(e) => return Err(format!("{}/{}: {e}", run.sweep, run.name)),
+            }
+            Ok(())
+        }
+        Action::Sweep => {
+            ensure_vulkan()?;
+            let hush = hush(&o, &layout)?;
+            let start = std::time::Instant::now();
+            let dataset = exec::prepare_dataset(&hush, &scale, &layout)?;
+            eprintln!(
+                "sweep: {} runs of `{}` at scale {} on {workers} worker(s), RAYON_NUM_THREADS={threads}",
+                runs.len(),
+                o.name,
+                scale.name
+            );
+            let jobs: Vec<_> =
+                runs.iter().map(|r| (r.clone(), &scale, dataset.clone(), layout.run(r, &scale.name))).collect();
+            // Complete runs of every sweep at this scale, to link runs with the same settings to.
+            let elsewhere: Vec<(Run, PathBuf)> = spec::load_sweeps(&defs, "all")?
+                .iter()
+                .flat_map(|s| s.runs(&scale))
+                .map(|r| {
+                    let dir = layout.run(&r, &scale.name);
+                    (r, dir)
+                })
+                .collect();
+            let outcomes = exec::run_all(&hush, &jobs, &elsewhere, workers, threads);
+            collect(&sweeps, &scale, &runs, &layout)?;
+            let failed: Vec<String> = runs
+                .iter()
+                .zip(&outcomes)
+                .filter_map(|(r, o)| match o {
+                    Outcome::Failed(e) => Some(format!("{}/{}: {e}", r.sweep, r.name)),
+                    _ => None,
+                })
+                .collect();
+            eprintln!("sweep: {:.1} s in all", start.elapsed().as_secs_f64());
+            if failed.is_empty() {
+                Ok(())
+            } else {
+                Err(format!("{} run(s) failed; re-run to retry them:\n  {}", failed.len(), failed.join("\n  ")))
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(s: &str) -> Vec<String> {
+        s.split_whitespace().map(String::from).collect()
+    }
+
+    #[test]
+    fn options() {
+        let o = parse(&args("loss --scale small --jobs 2 --run 3")).unwrap();
+        assert_eq!((o.name.as_str(), o.scale.as_str(), o.jobs, o.action), ("loss", "small", Some(2), Action::Run(3)));
+        assert_eq!(parse(&args("all --emit slurm")).unwrap().action, Action::EmitSlurm);
+        assert!(parse(&args("all --collect --list")).unwrap_err().contains("only one of"));
+        assert!(parse(&args("all --jobs 0")).unwrap_err().contains("≥ 1"));
+        assert!(parse(&args("--scale tiny")).unwrap_err().contains("usage"));
+        assert!(parse(&args("all --emit pbs")).unwrap_err().contains("only `slurm`"));
+    }
+}
