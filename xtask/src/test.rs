@@ -1,12 +1,22 @@
 //! `cargo xtask test`: installs what a fresh machine lacks (a Vulkan driver), then runs every
-//! test of the workspace.
+//! test of the workspace, then the thesis's sweeps at their tiny scale (a real dataset, training
+//! and evaluation of every sweep's runs, and the aggregate report), from scratch.
 
 use std::process::Command;
 
-use crate::util::{Result, ensure_vulkan, project_root, spawn};
+use crate::util::{Result, ensure_vulkan, project_root, spawn, target_dir};
 
 pub fn run(args: &[String]) -> Result<()> {
     ensure_vulkan()?;
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    spawn(Command::new(cargo).current_dir(project_root()).args(["test", "--workspace"]).args(args))
+    spawn(Command::new(cargo).current_dir(project_root()).args(["test", "--workspace"]).args(args))?;
+    if !args.is_empty() {
+        // A filtered test run (`cargo xtask test <filter>`) is not the whole suite.
+        return Ok(());
+    }
+    let out = target_dir().join("test-sweeps");
+    if out.exists() {
+        std::fs::remove_dir_all(&out).map_err(|e| format!("cannot clear {}: {e}", out.display()))?;
+    }
+    crate::sweep::run(&["all".into(), "--scale".into(), "tiny".into(), "--out".into(), out.display().to_string()])
 }

@@ -169,11 +169,16 @@ fn lock(dir: &Path) -> Result<Option<File>> {
         .write(true)
         .open(&path)
         .map_err(|e| format!("{}: {e}", path.display()))?;
-    match file.try_lock() {
-        Ok(()) => Ok(Some(file)),
-        Err(std::fs::TryLockError::WouldBlock) => Ok(None),
-        Err(std::fs::TryLockError::Error(e)) => Err(format!("{}: {e}", path.display())),
+    // A child that another thread of this process is starting holds a copy of the descriptor (and so the
+    // lock) until it executes its program; a lock still held after half a second belongs to a live holder.
+    for _ in 0..50 {
+        match file.try_lock() {
+            Ok(()) => return Ok(Some(file)),
+            Err(std::fs::TryLockError::WouldBlock) => std::thread::sleep(std::time::Duration::from_millis(10)),
+            Err(std::fs::TryLockError::Error(e)) => return Err(format!("{}: {e}", path.display())),
+        }
     }
+    Ok(None)
 }
 
 fn run_inner(hush: &Path, run: &Run, scale: &Scale, dataset: &Path, dir: &Path, threads: usize) -> Result<f64> {
@@ -350,7 +355,7 @@ mod tests {
         use std::os::unix::fs::PermissionsExt;
         let exe = dir.join("fake-hush");
         let script = format!(
-            "#!/bin/sh\necho \"$1\" >> {calls}\n\
+            "#!/bin/sh\n[ \"$1\" = probe ] && exit 0\necho \"$1\" >> {calls}\n\
              if [ \"$1\" = train ]; then mkdir -p \"$5\" && touch \"$5/summary.json\" \"$5/model.safetensors\"; fi\nif [ \"$1\" = eval ] && [ -e {fail} ]; then echo boom >&2; exit 3; fi\n\
              exit 0\n",
             calls = dir.join("calls").display(),
@@ -358,6 +363,18 @@ mod tests {
         );
         std::fs::write(&exe, script).unwrap();
         std::fs::set_permissions(&exe, std::fs::Permissions::from_mode(0o755)).unwrap();
+        // A child forked by another test thread may still hold the write descriptor of the script for a
+        // moment, and Linux refuses to execute a file open for writing (ETXTBSY). Once one execution
+        // succeeds, no descriptor is left to copy.
+        for _ in 0..500 {
+            match Command::new(&exe).arg("probe").status() {
+                Err(e) if e.raw_os_error() == Some(26) => std::thread::sleep(std::time::Duration::from_millis(10)),
+                other => {
+                    assert!(other.expect("the fake hush runs").success());
+                    break;
+                }
+            }
+        }
         exe
     }
 
