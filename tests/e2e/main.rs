@@ -1,6 +1,9 @@
 //! End-to-end tests of the `hush` command line: bad input gets a clear error and no panic, and
 //! the whole pipeline (dataset → train → denoise → eval) runs on a tiny Cornell box.
 
+mod procedural;
+mod shared_scenes;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -350,6 +353,27 @@ fn recorded_files(manifest: &Path, root: &Path) -> Vec<(String, u64, std::time::
         .collect()
 }
 
+/// Runs `hush args` and kills it (SIGKILL) once the manifest in `ds` records `count` images; returns the
+/// files recorded then.
+#[cfg(unix)]
+fn kill_once_recorded(args: &[&str], ds: &Path, count: usize) -> Vec<(String, u64, std::time::SystemTime)> {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_hush"))
+        .args(args)
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("hush starts");
+    let manifest = ds.join("manifest.json");
+    while recorded_files(&manifest, ds).len() < count {
+        if let Some(status) = child.try_wait().unwrap() {
+            panic!("hush dataset finished ({status}) before it could be killed; give it more work");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    recorded_files(&manifest, ds)
+}
+
 /// Kill `hush dataset` (SIGKILL) once its first images are recorded; the re-run keeps every recorded image
 /// (same inode and mtime: not re-rendered), leaves no temporary file, and the result passes `check`. Also
 /// renders the same job in two shards and checks the merged manifest.
@@ -375,24 +399,8 @@ fn killed_dataset_resumes_without_rerendering() {
         "--size",
         "48",
     ];
-    let mut child = Command::new(env!("CARGO_BIN_EXE_hush"))
-        .args(args)
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .expect("hush starts");
     let manifest = ds.join("manifest.json");
-    let mut before = Vec::new();
-    while before.len() < 2 {
-        if let Some(status) = child.try_wait().unwrap() {
-            panic!("hush dataset finished ({status}) before it could be killed; give it more work");
-        }
-        std::thread::sleep(std::time::Duration::from_millis(20));
-        before = recorded_files(&manifest, &ds);
-    }
-    child.kill().unwrap();
-    child.wait().unwrap();
-    let before = recorded_files(&manifest, &ds);
-    assert!(!before.is_empty());
+    let before = kill_once_recorded(&args, &ds, 2);
     let m = manifest_of(&ds);
     assert!(m["views"].as_array().unwrap().len() < 3, "killed before the end: {m}");
 

@@ -600,7 +600,7 @@ impl<'a> Gen<'a> {
     }
 
     /// A rectangle centred at `c` spanning ±`u` and ±`v`, its front facing `facing`.
-    fn rectangle(&mut self, name: &str, c: Vec3, u: Vec3, v: Vec3, facing: Vec3, bsdf: &Bsdf, emission: Option<Vec3>) {
+    fn rectangle(&mut self, name: &str, c: Vec3, [u, v]: [Vec3; 2], facing: Vec3, bsdf: &Bsdf, emission: Option<Vec3>) {
         let v = if u.cross(v).dot(facing) < 0.0 { -v } else { v };
         let n = u.cross(v).normalize();
         let m = [[u.x, v.x, n.x, c.x], [u.y, v.y, n.y, c.y], [u.z, v.z, n.z, c.z], [0.0, 0.0, 0.0, 1.0]];
@@ -624,9 +624,9 @@ impl<'a> Gen<'a> {
         let (w, h, d) = (room.x, room.y, room.z);
         let floor = self.surface_material();
         let half = Vec3::new(w / 2.0, 0.0, d / 2.0);
-        self.rectangle("floor", half, Vec3::X * half.x, Vec3::Z * half.z, Vec3::Y, &floor, None);
+        self.rectangle("floor", half, [Vec3::X * half.x, Vec3::Z * half.z], Vec3::Y, &floor, None);
         let ceiling = self.surface_material();
-        self.rectangle("ceiling", half + Vec3::Y * h, Vec3::X * half.x, Vec3::Z * half.z, -Vec3::Y, &ceiling, None);
+        self.rectangle("ceiling", half + Vec3::Y * h, [Vec3::X * half.x, Vec3::Z * half.z], -Vec3::Y, &ceiling, None);
         let wall = self.surface_material();
         // Walls: (corner, direction along the wall, length, inward normal).
         let walls = [
@@ -671,7 +671,7 @@ impl<'a> Gen<'a> {
             if !door && (self.style == Style::Glass || self.rng.chance(0.3)) {
                 let p = "<float name=\"int_ior\" value=\"1.5\"/>";
                 let pane = self.bsdf("thindielectric", MaterialClass::Glass, p, false);
-                self.rectangle("pane", centre, t * hu, Vec3::Y * hv, n, &pane, None);
+                self.rectangle("pane", centre, [t * hu, Vec3::Y * hv], n, &pane, None);
             }
             // Daylight: a panel outside, facing in (not in dark scenes, not always).
             if self.style != Style::Dark && self.rng.chance(0.7) {
@@ -683,8 +683,7 @@ impl<'a> Gen<'a> {
                 self.rectangle(
                     "daylight",
                     centre - n * dist,
-                    t * hu * grow,
-                    Vec3::Y * hv * grow,
+                    [t * hu * grow, Vec3::Y * hv * grow],
                     n,
                     &black,
                     Some(radiance),
@@ -703,7 +702,7 @@ impl<'a> Gen<'a> {
             return;
         }
         let c = p0 + t * (a[0] + a[1]) / 2.0 + Vec3::Y * (b[0] + b[1]) / 2.0;
-        self.rectangle("wall", c, t * (a[1] - a[0]) / 2.0, Vec3::Y * (b[1] - b[0]) / 2.0, n, bsdf, None);
+        self.rectangle("wall", c, [t * (a[1] - a[0]) / 2.0, Vec3::Y * (b[1] - b[0]) / 2.0], n, bsdf, None);
     }
 
     /// A point on the ceiling at least `margin` from the walls.
@@ -725,7 +724,7 @@ impl<'a> Gen<'a> {
             let c = self.ceiling_point(hx.max(hz) + 0.1);
             let radiance = warm(&mut self.rng) * self.rng.range(2.0, 12.0);
             let black = self.black();
-            self.rectangle("panel", c, Vec3::X * hx, Vec3::Z * hz, -Vec3::Y, &black, Some(radiance));
+            self.rectangle("panel", c, [Vec3::X * hx, Vec3::Z * hz], -Vec3::Y, &black, Some(radiance));
             self.lights.push(LightKind::LargeArea);
         }
         for _ in 0..small {
@@ -744,7 +743,7 @@ impl<'a> Gen<'a> {
                 self.shape("disk", "lamp", &t, &black, "", Some(radiance));
             } else {
                 let c = self.ceiling_point(size + 0.1);
-                self.rectangle("lamp", c, Vec3::X * size, Vec3::Z * size, -Vec3::Y, &black, Some(radiance));
+                self.rectangle("lamp", c, [Vec3::X * size, Vec3::Z * size], -Vec3::Y, &black, Some(radiance));
             }
             self.lights.push(LightKind::SmallArea);
         }
