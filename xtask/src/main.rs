@@ -4,6 +4,7 @@
 mod bench;
 mod demo;
 mod mitsuba;
+mod procedural;
 mod test;
 mod util;
 
@@ -18,6 +19,9 @@ tasks:
                              (512², max_depth 8), hush against Mitsuba 3 when it is installed
   bench dataset [--size N] [--views N]
                              perspectives per hour of `hush dataset` (default settings) on the Cornell box
+  procedural check [--count N] [--seed S] [--features default|all]
+                             N procedural scenes (default 100) generate and render at 32² without
+                             NaN/Inf; spread of mean luminance, material and light mix
   mitsuba setup              install Mitsuba 3 (PyPI) into target/mitsuba-venv and verify it renders
   mitsuba references         re-render the references of data/tests/mitsuba with Mitsuba 3";
 
@@ -28,6 +32,7 @@ fn main() -> ExitCode {
         Some("bench") => bench::run(&args[1..]),
         Some("test") => test::run(&args[1..]),
         Some("mitsuba") => mitsuba::run(&args[1..]),
+        Some("procedural") => procedural::run(&args[1..]),
         _ => Err(USAGE.to_string()),
     };
     match result {
