@@ -374,6 +374,16 @@ fn kill_once_recorded(args: &[&str], ds: &Path, count: usize) -> Vec<(String, u6
     recorded_files(&manifest, ds)
 }
 
+/// Runs `hush args` to completion and checks that it kept every file of `before` (same inode and mtime).
+#[cfg(unix)]
+fn rerun_keeps(args: &[&str], ds: &Path, before: &[(String, u64, std::time::SystemTime)]) {
+    expect_success(args);
+    let after = recorded_files(&ds.join("manifest.json"), ds);
+    for file in before {
+        assert!(after.contains(file), "{} was rendered again after the kill", file.0);
+    }
+}
+
 /// Kill `hush dataset` (SIGKILL) once its first images are recorded; the re-run keeps every recorded image
 /// (same inode and mtime: not re-rendered), leaves no temporary file, and the result passes `check`. Also
 /// renders the same job in two shards and checks the merged manifest.
@@ -399,16 +409,11 @@ fn killed_dataset_resumes_without_rerendering() {
         "--size",
         "48",
     ];
-    let manifest = ds.join("manifest.json");
     let before = kill_once_recorded(&args, &ds, 2);
     let m = manifest_of(&ds);
     assert!(m["views"].as_array().unwrap().len() < 3, "killed before the end: {m}");
 
-    expect_success(&args);
-    let after = recorded_files(&manifest, &ds);
-    for file in &before {
-        assert!(after.contains(file), "{} was rendered again after the kill", file.0);
-    }
+    rerun_keeps(&args, &ds, &before);
     let leftovers: Vec<_> = std::fs::read_dir(&ds)
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use crate::{expect_success, kill_once_recorded, manifest_of, recorded_files, s, scratch};
+use crate::{expect_success, kill_once_recorded, manifest_of, rerun_keeps, s, scratch};
 
 fn shared_scene(name: &str) -> PathBuf {
     let p = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/scenes")).join(name).join("scene.xml");
@@ -36,15 +36,10 @@ fn two_shared_scenes_two_views_resume_after_kill_and_pass_check() {
         "--size",
         "64",
     ];
-    let manifest = ds.join("manifest.json");
     let before = kill_once_recorded(&args, &ds, 2);
     assert!(manifest_of(&ds)["views"].as_array().unwrap().len() < 4, "killed before the end");
 
-    expect_success(&args);
-    let after = recorded_files(&manifest, &ds);
-    for file in &before {
-        assert!(after.contains(file), "{} was rendered again after the kill", file.0);
-    }
+    rerun_keeps(&args, &ds, &before);
     let m = manifest_of(&ds);
     let views: Vec<String> =
         m["views"].as_array().unwrap().iter().map(|v| format!("{}_{}", v["scene"], v["view"])).collect();
