@@ -151,7 +151,7 @@ fn pipeline_runs_end_to_end() {
         "--test-views",
         "1",
         "--spp",
-        "2",
+        "1,2",
         "--ref-spp",
         "16",
         "--aux-spp",
@@ -221,13 +221,56 @@ fn pipeline_runs_end_to_end() {
     assert!(err.contains("--albedo"), "{err}");
 
     let report = dir.join("report");
-    expect_success(&["eval", "--dataset", s(&ds), "--model", s(&model), "--out", s(&report), "--timing-runs", "1"]);
+    let eval = ["eval", "--dataset", s(&ds), "--model", s(&model), "--out", s(&report), "--timing-runs", "1"];
+    let err = expect_error(&[&eval[..], &["--baseline", "noisy,no-such-filter"]].concat());
+    assert!(err.contains("unknown baseline 'no-such-filter'") && err.contains("noisy ("), "{err}");
+    expect_success(&[&eval[..], &["--baseline", "noisy", "--baseline", "guided"]].concat());
+    check_eval_report(&report);
+}
+
+/// What `hush eval` writes on the pipeline's dataset (one test view, 1 and 2 spp): summary.json (schema 2)
+/// with separate render and denoise seconds, the error-against-time CSV, comparisons and plots, pictures,
+/// report.md and a self-contained report.html.
+fn check_eval_report(report: &Path) {
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(report.join("summary.json")).unwrap()).unwrap();
-    let methods: Vec<&str> =
-        summary["rows"].as_array().unwrap().iter().map(|r| r["method"].as_str().unwrap()).collect();
-    assert!(methods.contains(&"noisy") && methods.contains(&"run/model"), "{methods:?}");
-    assert!(report.join("report.md").is_file());
+    assert_eq!(summary["schema"], 2);
+    let rows = summary["rows"].as_array().unwrap();
+    let methods: Vec<&str> = rows.iter().map(|r| r["method"].as_str().unwrap()).collect();
+    assert_eq!(methods, ["reference", "noisy", "run/model", "guided", "noisy", "run/model", "guided"]);
+    for r in rows {
+        assert!(r["render_seconds"].as_f64().is_some_and(|t| t > 0.0), "{r}");
+        let denoiser = r["method"] == "run/model" || r["method"] == "guided";
+        assert_eq!(r["denoise_seconds"].is_null(), !denoiser, "{r}");
+        assert!(r["ms_ssim"].is_null(), "32 px is too small for MS-SSIM: {r}");
+        assert!(r["flip"].as_f64().is_some_and(|f| (0.0..=1.0).contains(&f)), "{r}");
+    }
+    let tradeoff = summary["tradeoff"].as_array().unwrap();
+    assert_eq!(tradeoff.len(), 8, "model and filter at 1 and 2 spp, for relMSE and 1 - SSIM: {tradeoff:?}");
+    assert!(tradeoff.iter().all(|c| c["method"] != "noisy" && c["seconds"].as_f64().is_some()));
+
+    let csv = std::fs::read_to_string(report.join("error_vs_time.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines[0], "view,method,spp,render_seconds,denoise_seconds,seconds,rel_mse,one_minus_ssim");
+    assert_eq!(lines.len(), 7, "noisy, the model and the filter at 1 and 2 spp:\n{csv}");
+    for plot in ["error_vs_time_rel_mse.png", "error_vs_time_one_minus_ssim.png"] {
+        let png = image::open(report.join(plot)).unwrap().to_rgb8();
+        assert!(png.pixels().any(|p| p.0 == [0, 0, 0]), "{plot} draws the noisy curve in black");
+    }
+    let pictures = report.join("pictures");
+    for kind in ["noisy_crop", "run-model_crop", "guided_crop", "reference_crop", "noisy_diff", "guided_diff"] {
+        let file = pictures.join(format!("cbox_v001_000001_{kind}.png"));
+        assert!(file.is_file(), "{} is missing", file.display());
+    }
+
+    let md = std::fs::read_to_string(report.join("report.md")).unwrap();
+    assert!(md.contains("## cbox_v001 at 1 spp (as the thesis's Tables 8.1–8.3)"), "{md}");
+    assert!(md.contains("](error_vs_time_rel_mse.png)") && md.contains("run/model at 1 spp"), "{md}");
+    let html = std::fs::read_to_string(report.join("report.html")).unwrap();
+    assert!(html.starts_with("<!DOCTYPE html>") && html.trim_end().ends_with("</html>"));
+    let images = html.matches("<img ").count();
+    assert_eq!(images, 2 + 4 + 3, "two plots, four crops, three difference pictures");
+    assert_eq!(html.matches("src=\"data:image/png;base64,").count(), images, "every image is inline");
 }
 
 /// A second small scene for dataset tests: the Cornell box's meshes with a bluish light.
@@ -454,8 +497,24 @@ fn small_dataset(dir: &Path) -> PathBuf {
     let ds = dir.join("ds");
     let scene = cbox();
     expect_success(&[
-        "dataset", s(&scene), "--out", s(&ds), "--views", "3", "--test-views", "1", "--spp", "2,4", "--ref-spp", "16",
-        "--aux-spp", "4", "--size", "32", "--seed", "3",
+        "dataset",
+        s(&scene),
+        "--out",
+        s(&ds),
+        "--views",
+        "3",
+        "--test-views",
+        "1",
+        "--spp",
+        "2,4",
+        "--ref-spp",
+        "16",
+        "--aux-spp",
+        "4",
+        "--size",
+        "32",
+        "--seed",
+        "3",
     ]);
     ds
 }
@@ -476,8 +535,27 @@ fn train_resumes_exactly_after_sigkill() {
     let ds = small_dataset(&dir);
     let args = |out: &Path| -> Vec<String> {
         [
-            "train", "--dataset", s(&ds), "--out", s(out), "--steps", "400", "--batch", "2", "--crop", "32", "--width",
-            "0.125", "--eval-every", "5", "--seed", "7", "--schedule", "cosine", "--augment", "full",
+            "train",
+            "--dataset",
+            s(&ds),
+            "--out",
+            s(out),
+            "--steps",
+            "400",
+            "--batch",
+            "2",
+            "--crop",
+            "32",
+            "--width",
+            "0.125",
+            "--eval-every",
+            "5",
+            "--seed",
+            "7",
+            "--schedule",
+            "cosine",
+            "--augment",
+            "full",
         ]
         .map(String::from)
         .to_vec()

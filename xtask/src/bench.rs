@@ -21,8 +21,12 @@ pub fn run(args: &[String]) -> Result<()> {
     match args.first().map(String::as_str) {
         Some("render") => render(&args[1..]),
         Some("dataset") => dataset(&args[1..]),
+        Some("net") => crate::bench_net::net(&args[1..]),
+        Some("train") => crate::bench_net::train(&args[1..]),
         _ => Err("usage: cargo xtask bench render [--release] [--spp N] [--no-mitsuba] [--no-build]\n       \
-                  cargo xtask bench dataset [--release] [--size N] [--views N]"
+                  cargo xtask bench dataset [--release] [--size N] [--views N]\n       \
+                  cargo xtask bench net [--release]\n       \
+                  cargo xtask bench train [--release] [--steps N]"
             .into()),
     }
 }

@@ -4,51 +4,79 @@
 //! narrow U-Net on all but one perspective → denoise the held-out one → `target/demo/report.md`.
 //! Fails loudly unless the denoised image beats the noisy one in PSNR at every spp.
 
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use crate::util::{Result, build_hush, ensure_vulkan, project_root, read_json, release, spawn, target_dir};
 
-pub fn run(args: &[String]) -> Result<()> {
-    ensure_vulkan()?;
-    let hush = build_hush(release(args))?;
-    let dir = target_dir().join("demo");
-    let dataset = dir.join("dataset");
-    let run_dir = dir.join("run");
-    let scene = project_root().join("data/scenes/cbox/scene.xml");
-    // Each demo starts from scratch, so that output of an older build never mixes in;
-    // `--resume` keeps what an interrupted demo already rendered and trained.
-    if !args.iter().any(|a| a == "--resume") && dir.exists() {
-        std::fs::remove_dir_all(&dir).map_err(|e| format!("cannot clear {}: {e}", dir.display()))?;
+/// Where the demo writes: `target/demo/` with `dataset/`, `run/` and the report.
+pub struct DemoPaths {
+    pub dir: PathBuf,
+    pub dataset: PathBuf,
+    pub run_dir: PathBuf,
+}
+
+impl DemoPaths {
+    pub fn new() -> DemoPaths {
+        let dir = target_dir().join("demo");
+        DemoPaths { dataset: dir.join("dataset"), run_dir: dir.join("run"), dir }
     }
 
+    /// The trained model.
+    pub fn model(&self) -> PathBuf {
+        self.run_dir.join("model.safetensors")
+    }
+}
+
+/// Renders the demo dataset (resuming what is already rendered).
+pub fn render_dataset(hush: &Path, paths: &DemoPaths) -> Result<()> {
+    let scene = project_root().join("data/scenes/cbox/scene.xml");
     spawn(
-        Command::new(&hush)
+        Command::new(hush)
             .arg("dataset")
             .arg(&scene)
             .arg("--out")
-            .arg(&dataset)
+            .arg(&paths.dataset)
             .args(["--views", "6", "--test-views", "1", "--spp", "4,16", "--ref-spp", "256"])
             .args(["--aux-spp", "32", "--size", "128", "--seed", "1"]),
-    )?;
-    spawn(
-        Command::new(&hush)
-            .arg("train")
-            .arg("--dataset")
-            .arg(&dataset)
-            .arg("--out")
-            .arg(&run_dir)
-            .args(["--features", "color,albedo,normal", "--spp", "4,16", "--steps", "1000"])
-            .args(["--batch", "4", "--crop", "64", "--width", "0.25", "--lr", "1e-3", "--loss", "mix", "--seed", "1"]),
-    )?;
+    )
+}
+
+/// `hush train` with the demo's settings; `cargo xtask bench train` measures the same.
+pub fn train_command(hush: &Path, dataset: &Path, run: &Path, steps: u32) -> Command {
+    let mut cmd = Command::new(hush);
+    cmd.arg("train").arg("--dataset").arg(dataset).arg("--out").arg(run);
+    cmd.args(["--features", "color,albedo,normal", "--spp", "4,16", "--batch", "4", "--crop", "64"]);
+    cmd.args(["--width", "0.25", "--lr", "1e-3", "--loss", "mix", "--seed", "1", "--steps", &steps.to_string()]);
+    cmd
+}
+
+/// Trains the demo model (1000 steps) on the demo dataset.
+pub fn train(hush: &Path, paths: &DemoPaths) -> Result<()> {
+    spawn(&mut train_command(hush, &paths.dataset, &paths.run_dir, 1000))
+}
+
+pub fn run(args: &[String]) -> Result<()> {
+    ensure_vulkan()?;
+    let hush = build_hush(release(args))?;
+    let paths = DemoPaths::new();
+    let dir = &paths.dir;
+    // Each demo starts from scratch, so that output of an older build never mixes in;
+    // `--resume` keeps what an interrupted demo already rendered and trained.
+    if !args.iter().any(|a| a == "--resume") && dir.exists() {
+        std::fs::remove_dir_all(dir).map_err(|e| format!("cannot clear {}: {e}", dir.display()))?;
+    }
+    render_dataset(&hush, &paths)?;
+    train(&hush, &paths)?;
     spawn(
         Command::new(&hush)
             .arg("eval")
             .arg("--dataset")
-            .arg(&dataset)
+            .arg(&paths.dataset)
             .arg("--model")
-            .arg(run_dir.join("model.safetensors"))
+            .arg(paths.model())
             .arg("--out")
-            .arg(&dir),
+            .arg(dir),
     )?;
 
     let summary = read_json(&dir.join("summary.json"))?;

@@ -1,8 +1,11 @@
 //! `cargo xtask <task>`: orchestration of the `hush` binary. It spawns processes and reads
 //! their JSON; it links neither Candle nor wgpu.
 
+mod baselines;
 mod bench;
+mod bench_net;
 mod demo;
+mod eval;
 mod mitsuba;
 mod procedural;
 mod test;
@@ -14,11 +17,21 @@ const USAGE: &str = "usage: cargo xtask <task>
 tasks:
   test [cargo test args]     install a Vulkan driver if none is present, then run every test
   demo [--release] [--resume] render → dataset → train → eval → report on the bundled Cornell box
+  eval [--release] [--check-html] [--timing-runs N] [--dataset DIR --model FILE] [--out DIR]
+                             hush eval on the demo's dataset and model with every baseline: report,
+                             error against run time, pictures in target/eval/ (--check-html: render
+                             report.html in headless Chromium)
   bench render [--release] [--spp N]
                              M paths per CPU-second and relMSE × CPU-seconds on the Cornell box
                              (512², max_depth 8), hush against Mitsuba 3 when it is installed
   bench dataset [--size N] [--views N]
                              perspectives per hour of `hush dataset` (default settings) on the Cornell box
+  bench net [--release]      U-Net inference at 512² against official OIDN, a training step's GFLOP/s against
+                             the machine's GEMM rate, peak memory, for 1 and 2 threads
+  bench train [--release] [--steps N]
+                             steps per second and the loader's share of `hush train` (the demo's settings)
+  baselines setup            install OIDN 2.5.1, BM3D, flip-evaluator, scikit-image (PyPI) into target/baselines-venv
+  baselines check            run BM3D and OIDN through hush-eval on a Cornell box crop; fail unless both help
   procedural check [--count N] [--seed S] [--features default|all]
                              N procedural scenes (default 100) generate and render at 32² without
                              NaN/Inf; spread of mean luminance, material and light mix
@@ -30,9 +43,11 @@ fn main() -> ExitCode {
     let result = match args.first().map(String::as_str) {
         Some("demo") => demo::run(&args[1..]),
         Some("bench") => bench::run(&args[1..]),
+        Some("eval") => eval::run(&args[1..]),
         Some("test") => test::run(&args[1..]),
         Some("mitsuba") => mitsuba::run(&args[1..]),
         Some("procedural") => procedural::run(&args[1..]),
+        Some("baselines") => baselines::run(&args[1..]),
         _ => Err(USAGE.to_string()),
     };
     match result {

@@ -10,7 +10,7 @@ pub fn project_root() -> PathBuf {
 }
 
 /// The cargo that runs us.
-fn cargo() -> String {
+pub fn cargo() -> String {
     std::env::var("CARGO").unwrap_or_else(|_| "cargo".into())
 }
 

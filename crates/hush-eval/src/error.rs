@@ -30,6 +30,10 @@ pub enum Error {
     #[error(transparent)]
     Io(#[from] std::io::Error),
 
+    /// Drawing or encoding a plot or picture.
+    #[error("{0}")]
+    Picture(String),
+
     /// Serializing the JSON summary failed.
     #[error("{}: writing JSON failed: {source}", path.display())]
     Json { path: PathBuf, source: serde_json::Error },

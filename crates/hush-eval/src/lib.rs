@@ -1,9 +1,9 @@
-//! Metrics (PSNR, SSIM, MAE, MSE after Open Image Denoise's tonemap; relMSE on HDR), timing and reports for
-//! hush denoisers.
+//! Metrics (PSNR, SSIM, MS-SSIM, MAE, MSE after Open Image Denoise's tonemap; relMSE on HDR), timing, error
+//! against run time, pictures and reports for hush denoisers.
 //!
 //! Conventions: every metric takes `(test, reference)`. Both images are tonemapped with the exposure
 //! computed from the **reference** ([`exposure_of`]: OIDN's autoexposure), then OIDN's filmic curve and sRGB
-//! ([`tonemap`]); PSNR, SSIM, MAE and MSE compare those [0, 1] images, relMSE the linear ones. SSIM is
+//! ([`tonemap`]); PSNR, SSIM, MS-SSIM, MAE and MSE compare those [0, 1] images, relMSE the linear ones. SSIM is
 //! `hush_net::loss::ssim`, the same code as the training loss. See [`CONVENTIONS`].
 //!
 //! ```
@@ -15,23 +15,35 @@
 //! let mut noisy = reference.clone();
 //! noisy.pixel_mut(3, 4)[0] += 0.5;
 //! let m = compare(&noisy, &reference)?;
-//! assert!(m.psnr > 30.0 && m.ssim < 1.0);
+//! assert!(m.psnr > 30.0 && m.ssim < 1.0 && m.ms_ssim.is_none());
 //! assert!(compare(&reference, &reference)?.psnr.is_infinite());
 //!
-//! let report = Report { rows: vec![Row::new("cbox_v0", "noisy", 4, &m, None)], notes: vec![] };
+//! let report = Report { rows: vec![Row::new("cbox_v0", "noisy", 4, &m)], ..Report::default() };
 //! assert!(report.to_markdown().contains("| noisy | 4 |"));
 //! # Ok(())
 //! # }
 //! ```
 
 mod error;
+pub mod external;
+pub mod flip;
+pub mod guided;
+pub mod html;
 mod metrics;
+#[cfg(feature = "oidn")]
+pub mod oidn_native;
+pub mod pictures;
+mod plot;
 mod report;
 mod timing;
 mod tonemap;
+pub mod tradeoff;
 
 pub use error::{Error, Result};
-pub use metrics::{Metrics, compare, mae, mse, psnr, psnr_of_mse, rel_mse, ssim, ssim_tonemapped};
-pub use report::{CONVENTIONS, Report, Row};
+pub use metrics::{
+    MS_SSIM_MIN_SIDE, Metrics, compare, mae, ms_ssim_tonemapped, mse, psnr, psnr_of_mse, rel_mse, ssim, ssim_tonemapped,
+};
+pub use plot::{colour, plot_error_vs_time};
+pub use report::{CONVENTIONS, Figure, FigureImage, NOISY, REFERENCE, Report, Row, SCHEMA, Skipped, Table};
 pub use timing::{Timing, time_median};
 pub use tonemap::{exposure_of, filmic, tonemap};

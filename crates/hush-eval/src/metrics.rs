@@ -26,6 +26,12 @@ pub struct Metrics {
     pub mse: f64,
     /// Relative MSE on linear HDR images.
     pub rel_mse: f64,
+    /// MS-SSIM on tonemapped images (hush-net's MS-SSIM, 5 scales); `None` when the image is too small for
+    /// 5 scales (a side below [`MS_SSIM_MIN_SIDE`]), rather than a value on fewer scales that is not comparable.
+    pub ms_ssim: Option<f64>,
+    /// Mean LDR-FLIP of the tonemapped images ([`crate::flip::flip`] at its default pixels per degree);
+    /// `Option` so that rows written before FLIP existed still read.
+    pub flip: Option<f64>,
     /// The exposure both images were tonemapped with (from the reference).
     pub exposure: f32,
 }
@@ -42,8 +48,27 @@ pub fn compare(test: &Image, reference: &Image) -> Result<Metrics> {
         mae: mean_by(&t, &r, |d, _| d.abs()),
         mse,
         rel_mse: mean_by(test, reference, rel_se),
+        ms_ssim: ms_ssim_tonemapped(&t, &r)?,
+        flip: Some(crate::flip::flip(&t, &r)?.mean),
         exposure,
     })
+}
+
+/// The smallest side for which MS-SSIM is reported: 5 scales of the 11-pixel window, halving 4 times
+/// (`hush_net::loss::ms_ssim_scales`). OIDN's toolkit demands a side > 160.
+pub const MS_SSIM_MIN_SIDE: usize = hush_net::loss::SSIM_WINDOW << 4;
+
+/// MS-SSIM (5 scales, Wang's weights) of two images already in [0, 1]; `None` if a side is below
+/// [`MS_SSIM_MIN_SIDE`].
+pub fn ms_ssim_tonemapped(test: &Image, reference: &Image) -> Result<Option<f64>> {
+    same_size(test, reference)?;
+    let scales = hush_net::loss::MS_SSIM_WEIGHTS.len();
+    if hush_net::loss::ms_ssim_scales(test.height, test.width, scales) < scales {
+        return Ok(None);
+    }
+    let (x, y) = (to_nchw(test)?, to_nchw(reference)?);
+    let value = hush_net::loss::ms_ssim(&x, &y)?.to_dtype(candle_core::DType::F64)?.to_scalar::<f64>()?;
+    Ok(Some(value))
 }
 
 /// PSNR in dB of the tonemapped images: `10·log10(1 / mse)`; `f64::INFINITY` if they are identical.

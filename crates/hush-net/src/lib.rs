@@ -56,4 +56,4 @@ pub use unet::{
     ALIGNMENT, ConvShape, THESIS_M1_WIDTH, THESIS_M2_WIDTH, UNet, UNetConfig, UNetKind, crop, hwc_to_nchw,
     init_weights, nchw_to_hwc, pad_to_multiple,
 };
-pub use weights::{METADATA_KEY, ModelInfo, load_model, load_weights, read_metadata, save_weights};
+pub use weights::{F32View, METADATA_KEY, ModelInfo, load_model, load_weights, read_metadata, save_weights};

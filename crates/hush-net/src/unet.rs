@@ -206,6 +206,26 @@ impl UNetConfig {
         shapes
     }
 
+    /// Multiply-adds of one forward pass on a `height × width` input (already a multiple of
+    /// [`ALIGNMENT`]): every 3×3 convolution at the resolution it runs at (encoder level `l` at
+    /// `1/2^l`, the decoder levels at 1/8, 1/4, 1/2, 1, the output layer at full size). Pooling,
+    /// upsampling, biases and activations are not counted. OIDN's `unet` on 9 channels does about 125k
+    /// per pixel (`../shared/docs/anchors.md`).
+    pub fn multiply_adds(&self, height: usize, width: usize) -> u64 {
+        let plan = self.kind.plan();
+        let enc = plan.enc.iter().enumerate().flat_map(|(l, layers)| layers.iter().map(move |_| l));
+        let dec = plan.dec.iter().enumerate().flat_map(|(l, layers)| layers.iter().map(move |_| 3 - l));
+        let levels = enc.chain(dec).chain(std::iter::once(0));
+        self.conv_shapes()
+            .iter()
+            .zip(levels)
+            .map(|(s, level)| {
+                let pixels = ((height >> level) * (width >> level)) as u64;
+                (s.in_channels * s.out_channels * 9) as u64 * pixels
+            })
+            .sum()
+    }
+
     /// The number of weights and biases.
     pub fn parameter_count(&self) -> usize {
         self.conv_shapes().iter().map(|s| s.out_channels * (s.in_channels * 9 + 1)).sum()

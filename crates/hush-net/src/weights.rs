@@ -42,9 +42,17 @@ impl ModelInfo {
 }
 
 /// An owned little-endian f32 buffer with a shape, for `safetensors::serialize`.
-struct F32View {
+pub struct F32View {
     shape: Vec<usize>,
     bytes: Vec<u8>,
+}
+
+impl F32View {
+    /// A copy of `t` as f32.
+    pub fn of(t: &Tensor) -> Result<Self> {
+        let values = t.to_dtype(DType::F32)?.flatten_all()?.to_vec1::<f32>()?;
+        Ok(F32View { shape: t.dims().to_vec(), bytes: values.iter().flat_map(|v| v.to_le_bytes()).collect() })
+    }
 }
 
 impl View for F32View {
@@ -70,10 +78,7 @@ pub fn save_weights(varmap: &VarMap, info: &ModelInfo) -> Result<Vec<u8>> {
     {
         let vars = varmap.data().lock().map_err(|_| candle_core::Error::Msg("VarMap lock poisoned".into()))?;
         for (name, var) in vars.iter() {
-            let t = var.as_tensor();
-            let values = t.to_dtype(DType::F32)?.flatten_all()?.to_vec1::<f32>()?;
-            let bytes = values.iter().flat_map(|v| v.to_le_bytes()).collect();
-            views.push((name.clone(), F32View { shape: t.dims().to_vec(), bytes }));
+            views.push((name.clone(), F32View::of(var.as_tensor())?));
         }
     }
     views.sort_by(|a, b| a.0.cmp(&b.0));

@@ -23,7 +23,7 @@ use glam::{Mat4, Vec2, Vec3};
 
 use crate::shapes::Geometry;
 use crate::texture::srgb_to_linear;
-use crate::{Camera, Film, Material, Mesh, Reflectance, Scene, SceneError, Texture, TextureId};
+use crate::{Camera, Film, Material, Mesh, Microfacet, Reflectance, Scene, SceneError, Texture, TextureId};
 
 const SUPPORTED_EXTENSIONS: &[&str] =
     &["KHR_materials_emissive_strength", "KHR_materials_transmission", "KHR_materials_ior"];
@@ -308,6 +308,7 @@ impl Loader<'_> {
             }
             Material::Dielectric {
                 alpha,
+                distribution: Microfacet::Ggx,
                 int_ior: ior,
                 ext_ior: 1.0,
                 thin: false,
@@ -323,7 +324,13 @@ impl Loader<'_> {
                     "'{label}': a textured metal colour is not supported yet: the texture's mean is used"
                 ));
             }
-            Material::Conductor { alpha, ior: None, specular_reflectance: constant(base, &self.textures), two_sided }
+            Material::Conductor {
+                alpha,
+                distribution: Microfacet::Ggx,
+                ior: None,
+                specular_reflectance: constant(base, &self.textures),
+                two_sided,
+            }
         } else {
             if metallic > 0.0 {
                 self.warn(format!("'{label}': metallic {metallic} is not supported: taken as a dielectric (0)"));
@@ -335,6 +342,7 @@ impl Loader<'_> {
                     diffuse_reflectance: base,
                     specular_reflectance: Vec3::ONE,
                     alpha,
+                    distribution: Microfacet::Ggx,
                     int_ior: ior,
                     ext_ior: 1.0,
                     nonlinear: false,

@@ -30,7 +30,9 @@ use roxmltree::{Document, Node};
 
 use crate::shapes;
 use crate::texture::{TextureCache, read_image, srgb_to_linear};
-use crate::{Camera, ComplexIor, EnvMap, Environment, Film, Material, Mesh, Reflectance, Scene, SceneError, named};
+use crate::{
+    Camera, ComplexIor, EnvMap, Environment, Film, Material, Mesh, Microfacet, Reflectance, Scene, SceneError, named,
+};
 
 impl Scene {
     /// Parses Mitsuba XML text; `path` names the file in errors and anchors relative paths.
@@ -659,7 +661,8 @@ impl Parser<'_, '_> {
     }
 
     /// Microfacet parameters shared by the rough BSDFs: `alpha` (isotropic), `alpha_u`/`alpha_v`
-    /// (averaged geometrically, with a warning), `distribution` (GGX; Beckmann with a warning).
+    /// (averaged geometrically, with a warning), `distribution` (`beckmann`, Mitsuba's default,
+    /// or `ggx`; `phong` and `as` become Beckmann with a warning).
     fn microfacet(
         &mut self,
         child: Node,
@@ -667,6 +670,7 @@ impl Parser<'_, '_> {
         alpha: &mut f32,
         au: &mut Option<f32>,
         av: &mut Option<f32>,
+        dist: &mut Microfacet,
     ) -> Result<bool, SceneError> {
         match (self.tag(child), name) {
             ("float", "alpha") => *alpha = self.float(child)?,
@@ -675,11 +679,17 @@ impl Parser<'_, '_> {
             ("string", "distribution") => {
                 let d = self.string(child)?;
                 match d.as_str() {
-                    "ggx" => {}
-                    "beckmann" | "phong" | "as" => self.warn(
-                        child,
-                        format!("microfacet distribution '{d}' is not supported yet: GGX with the same alpha is used"),
-                    ),
+                    "ggx" => *dist = Microfacet::Ggx,
+                    "beckmann" => *dist = Microfacet::Beckmann,
+                    "phong" | "as" => {
+                        *dist = Microfacet::Beckmann;
+                        self.warn(
+                            child,
+                            format!(
+                                "microfacet distribution '{d}' is not supported yet: Beckmann with the same alpha is used"
+                            ),
+                        )
+                    }
                     _ => return Err(self.err(child, format!("unknown microfacet distribution '{d}' (ggx, beckmann)"))),
                 }
             }
@@ -692,15 +702,6 @@ impl Parser<'_, '_> {
     }
 
     fn finish_alpha(&mut self, node: Node, alpha: f32, au: Option<f32>, av: Option<f32>) -> Result<f32, SceneError> {
-        // Mitsuba's rough BSDFs default to Beckmann; hush has GGX only, so say so.
-        let rough = self.attr(node, "type").is_ok_and(|t| t.starts_with("rough"));
-        if rough && !node.children().any(|c| c.is_element() && c.attribute("name") == Some("distribution")) {
-            self.warn(
-                node,
-                "no microfacet distribution given: Mitsuba's default is 'beckmann', which is not supported yet: \
-                 GGX with the same alpha is used (add <string name=\"distribution\" value=\"ggx\"/> to silence this)",
-            );
-        }
         let a = match (au, av) {
             (None, None) => alpha,
             (u, v) => {
@@ -729,6 +730,7 @@ impl Parser<'_, '_> {
         let rough = ty.starts_with("rough");
         let mut alpha = if rough { 0.1 } else { 0.0 };
         let (mut au, mut av) = (None, None);
+        let mut dist = Microfacet::Beckmann;
         match ty.as_str() {
             "twosided" | "mask" | "bumpmap" | "normalmap" => {
                 let mut inner = Vec::new();
@@ -781,7 +783,7 @@ impl Parser<'_, '_> {
                 let mut specular_reflectance = Vec3::ONE;
                 for child in elements(node) {
                     let name = self.name(child).unwrap_or_default();
-                    if self.microfacet(child, &name, &mut alpha, &mut au, &mut av)? {
+                    if self.microfacet(child, &name, &mut alpha, &mut au, &mut av, &mut dist)? {
                         continue;
                     }
                     match name.as_str() {
@@ -816,7 +818,7 @@ impl Parser<'_, '_> {
                 }
                 let ior = ior.map(|c| ComplexIor { eta: c.eta / ext_eta, k: c.k / ext_eta });
                 let alpha = self.finish_alpha(node, alpha, au, av)?;
-                Ok(Material::Conductor { alpha, ior, specular_reflectance, two_sided: false })
+                Ok(Material::Conductor { alpha, distribution: dist, ior, specular_reflectance, two_sided: false })
             }
             "dielectric" | "thindielectric" | "roughdielectric" => {
                 let mut int_ior = named::ior("bk7").unwrap_or(1.5046);
@@ -825,7 +827,7 @@ impl Parser<'_, '_> {
                 let mut specular_transmittance = Vec3::ONE;
                 for child in elements(node) {
                     let name = self.name(child).unwrap_or_default();
-                    if rough && self.microfacet(child, &name, &mut alpha, &mut au, &mut av)? {
+                    if rough && self.microfacet(child, &name, &mut alpha, &mut au, &mut av, &mut dist)? {
                         continue;
                     }
                     match name.as_str() {
@@ -843,6 +845,7 @@ impl Parser<'_, '_> {
                 let alpha = self.finish_alpha(node, alpha, au, av)?;
                 Ok(Material::Dielectric {
                     alpha,
+                    distribution: dist,
                     int_ior,
                     ext_ior,
                     thin: ty == "thindielectric",
@@ -858,7 +861,7 @@ impl Parser<'_, '_> {
                 let mut nonlinear = false;
                 for child in elements(node) {
                     let name = self.name(child).unwrap_or_default();
-                    if rough && self.microfacet(child, &name, &mut alpha, &mut au, &mut av)? {
+                    if rough && self.microfacet(child, &name, &mut alpha, &mut au, &mut av, &mut dist)? {
                         continue;
                     }
                     match name.as_str() {
@@ -878,6 +881,7 @@ impl Parser<'_, '_> {
                     diffuse_reflectance,
                     specular_reflectance,
                     alpha,
+                    distribution: dist,
                     int_ior,
                     ext_ior,
                     nonlinear,

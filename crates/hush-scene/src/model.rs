@@ -100,6 +100,16 @@ impl Texture {
     }
 }
 
+/// The microfacet normal distribution of a rough BSDF (Mitsuba's `distribution`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Microfacet {
+    /// GGX (Trowbridge–Reitz); glTF's and OBJ's rough surfaces.
+    #[default]
+    Ggx,
+    /// Beckmann: Mitsuba's default for its rough BSDFs.
+    Beckmann,
+}
+
 /// The complex index of refraction of a conductor, per RGB channel.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ComplexIor {
@@ -109,8 +119,9 @@ pub struct ComplexIor {
 
 /// A surface's scattering model. A closed set: new models are new variants.
 ///
-/// `alpha` is the GGX roughness (Mitsuba's `alpha`, the root mean square slope); `0` is a
-/// perfectly smooth surface (Mitsuba's `conductor`, `dielectric`, `plastic`). `two_sided`
+/// `alpha` is the microfacet roughness (Mitsuba's `alpha`, the root mean square slope) of the
+/// `distribution`; `0` is a perfectly smooth surface (Mitsuba's `conductor`, `dielectric`,
+/// `plastic`). `two_sided`
 /// is Mitsuba's `twosided` wrapper (glTF's `doubleSided`): the back scatters like the front.
 /// Without it, diffuse, conductor and plastic surfaces are black from behind. Dielectrics are
 /// always two-sided: they separate an inside from an outside.
@@ -121,11 +132,18 @@ pub enum Material {
     /// A metal (`conductor`, `roughconductor`): Fresnel reflectance from `ior` times
     /// `specular_reflectance`; `ior: None` is Mitsuba's `material="none"`, a perfect mirror
     /// (Fresnel factor 1) tinted by `specular_reflectance`.
-    Conductor { alpha: f32, ior: Option<ComplexIor>, specular_reflectance: Vec3, two_sided: bool },
+    Conductor {
+        alpha: f32,
+        distribution: Microfacet,
+        ior: Option<ComplexIor>,
+        specular_reflectance: Vec3,
+        two_sided: bool,
+    },
     /// Glass and liquids (`dielectric`, `roughdielectric`, `thindielectric`). `thin` is a
     /// sheet of zero thickness: light passes through without bending.
     Dielectric {
         alpha: f32,
+        distribution: Microfacet,
         int_ior: f32,
         ext_ior: f32,
         thin: bool,
@@ -138,6 +156,7 @@ pub enum Material {
         diffuse_reflectance: Reflectance,
         specular_reflectance: Vec3,
         alpha: f32,
+        distribution: Microfacet,
         int_ior: f32,
         ext_ior: f32,
         nonlinear: bool,
@@ -178,15 +197,23 @@ impl Material {
     pub fn with_two_sided(self, two: bool) -> Material {
         match self {
             Material::Diffuse { reflectance, .. } => Material::Diffuse { reflectance, two_sided: two },
-            Material::Conductor { alpha, ior, specular_reflectance, .. } => {
-                Material::Conductor { alpha, ior, specular_reflectance, two_sided: two }
+            Material::Conductor { alpha, distribution, ior, specular_reflectance, .. } => {
+                Material::Conductor { alpha, distribution, ior, specular_reflectance, two_sided: two }
             }
             Material::Plastic {
-                diffuse_reflectance, specular_reflectance, alpha, int_ior, ext_ior, nonlinear, ..
+                diffuse_reflectance,
+                specular_reflectance,
+                alpha,
+                distribution,
+                int_ior,
+                ext_ior,
+                nonlinear,
+                ..
             } => Material::Plastic {
                 diffuse_reflectance,
                 specular_reflectance,
                 alpha,
+                distribution,
                 int_ior,
                 ext_ior,
                 nonlinear,

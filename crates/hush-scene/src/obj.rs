@@ -9,7 +9,7 @@ use glam::{Vec2, Vec3};
 
 use crate::shapes::Geometry;
 use crate::texture::TextureCache;
-use crate::{Film, Material, Mesh, Reflectance, Scene, SceneError};
+use crate::{Film, Material, Mesh, Microfacet, Reflectance, Scene, SceneError};
 
 /// One object (or one material run of an object) of an OBJ file.
 pub(crate) struct ObjObject {
@@ -259,17 +259,23 @@ pub(crate) fn mtl_material(
     let material = match m.illumination_model {
         Some(4 | 6 | 7 | 9) => Material::Dielectric {
             alpha: pr.unwrap_or(0.0),
+            distribution: Microfacet::Ggx,
             int_ior: ior,
             ext_ior: 1.0,
             thin: false,
             specular_reflectance: Vec3::ONE,
             specular_transmittance: Vec3::ONE,
         },
-        Some(3 | 5) => {
-            Material::Conductor { alpha, ior: None, specular_reflectance: ks.min(Vec3::ONE), two_sided: true }
-        }
+        Some(3 | 5) => Material::Conductor {
+            alpha,
+            distribution: Microfacet::Ggx,
+            ior: None,
+            specular_reflectance: ks.min(Vec3::ONE),
+            two_sided: true,
+        },
         _ if pm >= 0.5 => Material::Conductor {
             alpha,
+            distribution: Microfacet::Ggx,
             ior: None,
             specular_reflectance: if ks.max_element() > 0.0 { ks } else { kd }.min(Vec3::ONE),
             two_sided: true,
@@ -278,6 +284,7 @@ pub(crate) fn mtl_material(
             diffuse_reflectance: diffuse,
             specular_reflectance: ks.min(Vec3::ONE),
             alpha,
+            distribution: Microfacet::Ggx,
             int_ior: ior,
             ext_ior: 1.0,
             nonlinear: false,

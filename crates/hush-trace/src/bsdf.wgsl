@@ -14,22 +14,41 @@ const KIND_PLASTIC: u32 = 4u;
 
 const FLAG_TWO_SIDED: u32 = 1u;
 const FLAG_NONLINEAR: u32 = 2u;
+// Rough lobes use the Beckmann distribution instead of GGX.
+const FLAG_BECKMANN: u32 = 4u;
+
+// Specialization (pipeline-overridable constants, set per scene by render.rs): false removes
+// the code of a feature the scene does not use. The defaults give the generic kernel.
+override HAS_ROUGH_DIELECTRIC: bool = true;
+override HAS_ROUGH_PLASTIC: bool = true;
+override HAS_BECKMANN: bool = true;
 
 // One material, as flattened by upload.rs.
 //   a: rgb = diffuse reflectance (diffuse, plastic) or specular reflectance (conductor,
-//      dielectric); w = GGX alpha (0: smooth)
+//      dielectric); w = microfacet alpha (0: smooth)
 //   b: rgb = specular reflectance (plastic) or specular transmittance (dielectric);
 //      w = relative index of refraction int/ext (dielectric, plastic)
 //   c: rgb = conductor eta; w = kind | flags << 8 (bits)
 //   d: rgb = conductor k; w = the plastic's specular sampling weight
 //   emission: rgb = radiance; w = 1 if the surface emits
+//   e: x = offset in `aux` of the texture that replaces a.rgb (bits; NO_TEXTURE: none);
+//      y = offset in `aux` of the rough plastic's coat transmittance table (bits);
+//      z = the rough plastic's internal reflectance
 struct Material {
     a: vec4<f32>,
     b: vec4<f32>,
     c: vec4<f32>,
     d: vec4<f32>,
     emission: vec4<f32>,
+    e: vec4<f32>,
 }
+
+const NO_TEXTURE: u32 = 0xffffffffu;
+
+// Images and tables that records point into (upload.rs, `Aux`). An image: width and height
+// (bits), then linear RGB texels, rows top to bottom.
+@group(0) @binding(7) var<storage, read> aux: array<f32>;
+
 
 fn mat_kind(m: Material) -> u32 {
     return bitcast<u32>(m.c.w) & 0xffu;
@@ -42,7 +61,7 @@ fn mat_flags(m: Material) -> u32 {
 // Whether every lobe of the material is a delta lobe (no next-event estimation there).
 fn mat_is_delta(m: Material) -> bool {
     let k = mat_kind(m);
-    return (k == KIND_CONDUCTOR && m.a.w == 0.0) || k == KIND_DIELECTRIC || k == KIND_THIN_DIELECTRIC;
+    return ((k == KIND_CONDUCTOR || k == KIND_DIELECTRIC) && m.a.w == 0.0) || k == KIND_THIN_DIELECTRIC;
 }
 
 struct BsdfSample {
@@ -104,25 +123,128 @@ fn fresnel_conductor(cos_i_in: f32, eta: vec3<f32>, k: vec3<f32>) -> vec3<f32> {
     return 0.5 * (rp + rs);
 }
 
-// ---- GGX (isotropic), Smith's separable shadowing, visible-normal sampling ----
+// ---- microfacet distributions (isotropic GGX and Beckmann, Mitsuba's formulas) ----
 
-fn ggx_d(m: vec3<f32>, alpha: f32) -> f32 {
-    let cos2 = m.z * m.z;
+fn mf_beckmann(m: Material) -> bool {
+    return HAS_BECKMANN && (mat_flags(m) & FLAG_BECKMANN) != 0u;
+}
+
+fn mf_d(m: vec3<f32>, alpha: f32, beckmann: bool) -> f32 {
     if m.z <= 0.0 {
         return 0.0;
     }
+    let cos2 = m.z * m.z;
     let a2 = alpha * alpha;
-    let t = (m.x * m.x + m.y * m.y) / a2 + cos2;
-    return 1.0 / (PI * a2 * t * t);
+    let xy2 = m.x * m.x + m.y * m.y;
+    var r = 0.0;
+    if beckmann {
+        r = exp(-xy2 / (a2 * cos2)) / (PI * a2 * cos2 * cos2);
+    } else {
+        let t = xy2 / a2 + cos2;
+        r = 1.0 / (PI * a2 * t * t);
+    }
+    return select(0.0, r, r * m.z > 1e-20);
 }
 
-fn ggx_g1(v: vec3<f32>, m: vec3<f32>, alpha: f32) -> f32 {
+// Smith's G1; Beckmann through Mitsuba's rational fit.
+fn mf_g1(v: vec3<f32>, m: vec3<f32>, alpha: f32, beckmann: bool) -> f32 {
     if dot(v, m) * v.z <= 0.0 {
         return 0.0;
     }
-    let cos2 = v.z * v.z;
-    let tan2 = max(0.0, 1.0 - cos2) / max(cos2, 1e-12);
-    return 2.0 / (1.0 + sqrt(1.0 + alpha * alpha * tan2));
+    let xy = alpha * alpha * (v.x * v.x + v.y * v.y);
+    if xy == 0.0 {
+        return 1.0;
+    }
+    let t2 = xy / (v.z * v.z);
+    if beckmann {
+        let a = inverseSqrt(t2);
+        if a >= 1.6 {
+            return 1.0;
+        }
+        return (3.535 * a + 2.181 * a * a) / (1.0 + 2.276 * a + 2.577 * a * a);
+    }
+    return 2.0 / (1.0 + sqrt(1.0 + t2));
+}
+
+// Density of mf_sample_visible: D_wo(m) = G1(wo, m) |wo·m| D(m) / cos θo.
+fn mf_pdf_visible(wo: vec3<f32>, m: vec3<f32>, alpha: f32, beckmann: bool) -> f32 {
+    return mf_d(m, alpha, beckmann) * mf_g1(wo, m, alpha, beckmann) * abs(dot(wo, m)) / abs(wo.z);
+}
+
+fn mf_sample_visible(wo: vec3<f32>, alpha: f32, beckmann: bool, u: vec2<f32>) -> vec3<f32> {
+    if beckmann {
+        return beckmann_sample_visible(wo, alpha, u);
+    }
+    return ggx_sample_visible(wo, alpha, u);
+}
+
+// erf to 1.5e-7 (Abramowitz & Stegun 7.1.26).
+fn erf_approx(x: f32) -> f32 {
+    let z = abs(x);
+    let t = 1.0 / (1.0 + 0.3275911 * z);
+    let y = 1.0 - (((((1.061405429 * t - 1.453152027) * t) + 1.421413741) * t - 0.284496736) * t + 0.254829592) * t * exp(-z * z);
+    return select(-y, y, x >= 0.0);
+}
+
+// Inverse erf (Giles 2010, single precision).
+fn erfinv_approx(x: f32) -> f32 {
+    var w = -log(max((1.0 - x) * (1.0 + x), 1e-30));
+    var p = 0.0;
+    if w < 5.0 {
+        w = w - 2.5;
+        p = 2.81022636e-08;
+        p = 3.43273939e-07 + p * w;
+        p = -3.5233877e-06 + p * w;
+        p = -4.39150654e-06 + p * w;
+        p = 0.00021858087 + p * w;
+        p = -0.00125372503 + p * w;
+        p = -0.00417768164 + p * w;
+        p = 0.246640727 + p * w;
+        p = 1.50140941 + p * w;
+    } else {
+        w = sqrt(w) - 3.0;
+        p = -0.000200214257;
+        p = 0.000100950558 + p * w;
+        p = 0.00134934322 + p * w;
+        p = -0.00367342844 + p * w;
+        p = 0.00573950773 + p * w;
+        p = -0.0076224613 + p * w;
+        p = 0.00943887047 + p * w;
+        p = 1.00167406 + p * w;
+        p = 2.83297682 + p * w;
+    }
+    return p * x;
+}
+
+// A Beckmann visible normal (Mitsuba's sample_visible_11: the visible-slope CDF inverted by
+// Newton's method in the erf domain, kept inside its interval), stretched by alpha.
+fn beckmann_sample_visible(wo: vec3<f32>, alpha: f32, u_in: vec2<f32>) -> vec3<f32> {
+    let v = normalize(vec3<f32>(alpha * wo.x, alpha * wo.y, wo.z));
+    let u = clamp(u_in, vec2<f32>(1e-6), vec2<f32>(1.0 - 1e-6));
+    let cos_t = min(v.z, 0.99999);
+    let tan_t = sqrt(max(0.0, 1.0 - cos_t * cos_t)) / cos_t;
+    let cot_t = 1.0 / tan_t;
+    let maxval = erf_approx(cot_t);
+    let inv_sqrt_pi = 0.564189583547756;
+    var x = maxval - (maxval + 1.0) * erf_approx(sqrt(-log(u.x)));
+    let target_value = u.x * (1.0 + maxval + inv_sqrt_pi * tan_t * exp(-cot_t * cot_t));
+    for (var k = 0; k < 8; k++) {
+        let slope = erfinv_approx(x);
+        let value = 1.0 + x + inv_sqrt_pi * tan_t * exp(-slope * slope) - target_value;
+        let derivative = 1.0 - slope * tan_t;
+        x = clamp(x - value / max(derivative, 1e-6), -0.9999999, maxval);
+    }
+    let sx = erfinv_approx(x);
+    let sy = erfinv_approx(2.0 * u.y - 1.0);
+    let s = length(v.xy);
+    var cos_phi = 1.0;
+    var sin_phi = 0.0;
+    if s > 0.0 {
+        cos_phi = v.x / s;
+        sin_phi = v.y / s;
+    }
+    let slope = vec2<f32>(cos_phi * sx - sin_phi * sy, sin_phi * sx + cos_phi * sy) * alpha;
+    return normalize(vec3<f32>(-slope.x, -slope.y, 1.0));
 }
 
 // A microfacet normal distributed as D_wo(m) ∝ G1(wo, m) max(0, wo·m) D(m) (Heitz 2018).
@@ -183,6 +305,162 @@ fn plastic_diffuse(m: Material, cos_o: f32, cos_i: f32) -> vec3<f32> {
     return diffuse * (1.0 - f_o) * (1.0 - f_i) / (eta * eta);
 }
 
+// ---- rough plastic (Mitsuba's roughplastic) ----
+
+// The coat's transmittance 1 − albedo at cos θ, interpolated in the material's 64-entry table.
+fn plastic_transmittance(m: Material, cos_theta: f32) -> f32 {
+    let base = bitcast<u32>(m.e.y);
+    let x = clamp(cos_theta, 0.0, 1.0) * 63.0;
+    let i = min(u32(x), 62u);
+    return mix(aux[base + i], aux[base + i + 1u], x - f32(i));
+}
+
+// Probability of sampling the coat: its reflectance × the specular sampling weight, against
+// the base's transmittance × the diffuse weight.
+fn rough_plastic_coat_prob(m: Material, cos_o: f32) -> f32 {
+    let t = plastic_transmittance(m, cos_o);
+    let ps = (1.0 - t) * m.d.w;
+    let pd = t * (1.0 - m.d.w);
+    return ps / (ps + pd);
+}
+
+// f·cos θi of both lobes, wo and wi above the surface.
+fn rough_plastic_eval(m: Material, wo: vec3<f32>, wi: vec3<f32>) -> vec3<f32> {
+    let alpha = m.a.w;
+    let bk = mf_beckmann(m);
+    let eta = m.b.w;
+    let h = normalize(wo + wi);
+    let f = fresnel_dielectric(dot(wo, h), eta).r;
+    let g = mf_g1(wo, h, alpha, bk) * mf_g1(wi, h, alpha, bk);
+    let coat = m.b.xyz * (f * mf_d(h, alpha, bk) * g / (4.0 * wo.z));
+    var base = m.a.xyz;
+    if (mat_flags(m) & FLAG_NONLINEAR) != 0u {
+        base = base / (vec3<f32>(1.0) - base * m.e.z);
+    } else {
+        base = base / (1.0 - m.e.z);
+    }
+    let t = plastic_transmittance(m, wo.z) * plastic_transmittance(m, wi.z);
+    return coat + base * (INV_PI / (eta * eta) * wi.z * t);
+}
+
+fn rough_plastic_pdf(m: Material, wo: vec3<f32>, wi: vec3<f32>) -> f32 {
+    let ps = rough_plastic_coat_prob(m, wo.z);
+    let h = normalize(wo + wi);
+    let coat = mf_pdf_visible(wo, h, m.a.w, mf_beckmann(m)) / (4.0 * dot(wo, h));
+    return ps * coat + (1.0 - ps) * wi.z * INV_PI;
+}
+
+fn rough_plastic_sample(m: Material, wo: vec3<f32>, u: vec2<f32>, u_lobe: f32) -> BsdfSample {
+    var wi = vec3<f32>(0.0);
+    if u_lobe < rough_plastic_coat_prob(m, wo.z) {
+        wi = reflect_local(wo, mf_sample_visible(wo, m.a.w, mf_beckmann(m), u));
+    } else {
+        wi = cosine_local(u);
+    }
+    if wi.z <= 0.0 {
+        return no_sample();
+    }
+    let pdf = rough_plastic_pdf(m, wo, wi);
+    if !(pdf > 0.0) {
+        return no_sample();
+    }
+    return BsdfSample(wi, rough_plastic_eval(m, wo, wi) / pdf, pdf, false, true);
+}
+
+// ---- rough dielectric (Mitsuba's roughdielectric, visible normals) ----
+// `wo` faces the camera side, `wi` the light side; m.b.w = int/ext.
+
+// Generalized half vector, on the macro-surface's upper side, and the relative index
+// eta = n(wi side) / n(wo side) used by the refraction Jacobian.
+struct RoughHalf {
+    h: vec3<f32>,
+    eta: f32,
+    reflect: bool,
+    valid: bool,
+}
+
+fn rough_half(m: Material, wo: vec3<f32>, wi: vec3<f32>) -> RoughHalf {
+    let reflect = wo.z * wi.z > 0.0;
+    let eta = select(1.0 / m.b.w, m.b.w, wo.z > 0.0);
+    let v = wo + wi * select(eta, 1.0, reflect);
+    let len = length(v);
+    if wo.z == 0.0 || wi.z == 0.0 || len < 1e-7 {
+        return RoughHalf(vec3<f32>(0.0, 0.0, 1.0), eta, reflect, false);
+    }
+    var h = v / len;
+    h = select(-h, h, h.z >= 0.0);
+    // Micro- and macro-surface must agree on the side of each direction.
+    let valid = dot(wo, h) * wo.z > 0.0 && dot(wi, h) * wi.z > 0.0;
+    return RoughHalf(h, eta, reflect, valid);
+}
+
+fn rough_dielectric_eval(m: Material, wo: vec3<f32>, wi: vec3<f32>) -> vec3<f32> {
+    let rh = rough_half(m, wo, wi);
+    if !rh.valid {
+        return vec3<f32>(0.0);
+    }
+    let alpha = m.a.w;
+    let bk = mf_beckmann(m);
+    let d = mf_d(rh.h, alpha, bk);
+    let g = mf_g1(wo, rh.h, alpha, bk) * mf_g1(wi, rh.h, alpha, bk);
+    let f = fresnel_dielectric(dot(wo, rh.h), m.b.w).r;
+    if rh.reflect {
+        return m.a.xyz * (f * d * g / (4.0 * abs(wo.z)));
+    }
+    // Transmission; radiance compression by 1 / eta² cancels the Jacobian's eta².
+    let dwo = dot(wo, rh.h);
+    let dwi = dot(wi, rh.h);
+    let denom = dwo + rh.eta * dwi;
+    return m.b.xyz * ((1.0 - f) * abs(d * g * dwo * dwi / (wo.z * denom * denom)));
+}
+
+fn rough_dielectric_pdf(m: Material, wo: vec3<f32>, wi: vec3<f32>) -> f32 {
+    let rh = rough_half(m, wo, wi);
+    if !rh.valid {
+        return 0.0;
+    }
+    let dwi = dot(wi, rh.h);
+    var jacobian = 1.0 / (4.0 * abs(dwi));
+    if !rh.reflect {
+        let denom = dot(wo, rh.h) + rh.eta * dwi;
+        jacobian = rh.eta * rh.eta * abs(dwi) / (denom * denom);
+    }
+    let wo_up = select(-wo, wo, wo.z > 0.0);
+    let f = fresnel_dielectric(dot(wo, rh.h), m.b.w).r;
+    return mf_pdf_visible(wo_up, rh.h, m.a.w, mf_beckmann(m)) * select(1.0 - f, f, rh.reflect) * jacobian;
+}
+
+fn rough_dielectric_sample(m: Material, wo: vec3<f32>, u: vec2<f32>, u_lobe: f32) -> BsdfSample {
+    let alpha = m.a.w;
+    let bk = mf_beckmann(m);
+    let wo_up = select(-wo, wo, wo.z > 0.0);
+    let h = mf_sample_visible(wo_up, alpha, bk, u);
+    let fr = fresnel_dielectric(dot(wo, h), m.b.w);
+    var wi = vec3<f32>(0.0);
+    var weight = vec3<f32>(0.0);
+    if u_lobe <= fr.r {
+        wi = reflect_local(wo, h);
+        if wi.z * wo.z <= 0.0 {
+            return no_sample();
+        }
+        weight = m.a.xyz;
+    } else {
+        // Refraction through the microfacet; radiance scales by eta_ti².
+        wi = h * (dot(wo, h) * fr.eta_ti + fr.cos_t) - wo * fr.eta_ti;
+        if wi.z * wo.z >= 0.0 {
+            return no_sample();
+        }
+        weight = m.b.xyz * fr.eta_ti * fr.eta_ti;
+    }
+    wi = normalize(wi);
+    let g1 = mf_g1(wi, h, alpha, bk);
+    let pdf = rough_dielectric_pdf(m, wo, wi);
+    if !(pdf > 0.0) || g1 == 0.0 {
+        return no_sample();
+    }
+    return BsdfSample(wi, weight * g1, pdf, false, true);
+}
+
 // One-sided materials are black from behind; two-sided ones mirror the frame.
 fn front_frame(m: Material, wo: vec3<f32>, wi: vec3<f32>) -> mat2x3<f32> {
     if (mat_flags(m) & FLAG_TWO_SIDED) != 0u && wo.z < 0.0 {
@@ -194,6 +472,9 @@ fn front_frame(m: Material, wo: vec3<f32>, wi: vec3<f32>) -> mat2x3<f32> {
 // f·|cos θi| of the non-delta lobes.
 fn bsdf_eval(m: Material, wo_in: vec3<f32>, wi_in: vec3<f32>) -> vec3<f32> {
     let kind = mat_kind(m);
+    if HAS_ROUGH_DIELECTRIC && kind == KIND_DIELECTRIC && m.a.w > 0.0 {
+        return rough_dielectric_eval(m, wo_in, wi_in);
+    }
     if kind == KIND_DIELECTRIC || kind == KIND_THIN_DIELECTRIC {
         return vec3<f32>(0.0);
     }
@@ -211,10 +492,14 @@ fn bsdf_eval(m: Material, wo_in: vec3<f32>, wi_in: vec3<f32>) -> vec3<f32> {
         if alpha == 0.0 {
             return vec3<f32>(0.0);
         }
+        let bk = mf_beckmann(m);
         let h = normalize(wo + wi);
-        let g = ggx_g1(wo, h, alpha) * ggx_g1(wi, h, alpha);
+        let g = mf_g1(wo, h, alpha, bk) * mf_g1(wi, h, alpha, bk);
         let fr = fresnel_conductor(dot(wo, h), m.c.xyz, m.d.xyz) * m.a.xyz;
-        return fr * ggx_d(h, alpha) * g / (4.0 * wo.z);
+        return fr * mf_d(h, alpha, bk) * g / (4.0 * wo.z);
+    }
+    if HAS_ROUGH_PLASTIC && m.a.w > 0.0 {
+        return rough_plastic_eval(m, wo, wi);
     }
     // Plastic: only the diffuse base is non-delta.
     return plastic_diffuse(m, wo.z, wi.z) * INV_PI * wi.z;
@@ -223,6 +508,9 @@ fn bsdf_eval(m: Material, wo_in: vec3<f32>, wi_in: vec3<f32>) -> vec3<f32> {
 // Solid-angle density with which bsdf_sample produces wi through a non-delta lobe.
 fn bsdf_pdf(m: Material, wo_in: vec3<f32>, wi_in: vec3<f32>) -> f32 {
     let kind = mat_kind(m);
+    if HAS_ROUGH_DIELECTRIC && kind == KIND_DIELECTRIC && m.a.w > 0.0 {
+        return rough_dielectric_pdf(m, wo_in, wi_in);
+    }
     if kind == KIND_DIELECTRIC || kind == KIND_THIN_DIELECTRIC {
         return 0.0;
     }
@@ -241,7 +529,10 @@ fn bsdf_pdf(m: Material, wo_in: vec3<f32>, wi_in: vec3<f32>) -> f32 {
             return 0.0;
         }
         let h = normalize(wo + wi);
-        return ggx_d(h, alpha) * ggx_g1(wo, h, alpha) / (4.0 * wo.z);
+        return mf_pdf_visible(wo, h, alpha, mf_beckmann(m)) / (4.0 * dot(wo, h));
+    }
+    if HAS_ROUGH_PLASTIC && m.a.w > 0.0 {
+        return rough_plastic_pdf(m, wo, wi);
     }
     let f_o = fresnel_dielectric(wo.z, m.b.w).r;
     let p_spec = f_o * m.d.w;
@@ -252,6 +543,9 @@ fn bsdf_pdf(m: Material, wo_in: vec3<f32>, wi_in: vec3<f32>) -> f32 {
 // Samples wi given wo; `u` drives the direction, `u_lobe` the choice between lobes.
 fn bsdf_sample(m: Material, wo_in: vec3<f32>, u: vec2<f32>, u_lobe: f32) -> BsdfSample {
     let kind = mat_kind(m);
+    if HAS_ROUGH_DIELECTRIC && kind == KIND_DIELECTRIC && m.a.w > 0.0 {
+        return rough_dielectric_sample(m, wo_in, u, u_lobe);
+    }
     if kind == KIND_DIELECTRIC {
         let fr = fresnel_dielectric(wo_in.z, m.b.w);
         if u_lobe <= fr.r {
@@ -288,14 +582,17 @@ fn bsdf_sample(m: Material, wo_in: vec3<f32>, u: vec2<f32>, u_lobe: f32) -> Bsdf
             let wi = vec3<f32>(-wo.x, -wo.y, wo.z);
             s = BsdfSample(wi, fresnel_conductor(wo.z, m.c.xyz, m.d.xyz) * m.a.xyz, 1.0, true, true);
         } else {
-            let h = ggx_sample_visible(wo, alpha, u);
+            let bk = mf_beckmann(m);
+            let h = mf_sample_visible(wo, alpha, bk, u);
             let wi = reflect_local(wo, h);
             if wi.z > 0.0 {
                 let fr = fresnel_conductor(dot(wo, h), m.c.xyz, m.d.xyz) * m.a.xyz;
-                let pdf = ggx_d(h, alpha) * ggx_g1(wo, h, alpha) / (4.0 * wo.z);
-                s = BsdfSample(wi, fr * ggx_g1(wi, h, alpha), pdf, false, pdf > 0.0);
+                let pdf = mf_pdf_visible(wo, h, alpha, bk) / (4.0 * dot(wo, h));
+                s = BsdfSample(wi, fr * mf_g1(wi, h, alpha, bk), pdf, false, pdf > 0.0);
             }
         }
+    } else if HAS_ROUGH_PLASTIC && m.a.w > 0.0 {
+        s = rough_plastic_sample(m, wo, u, u_lobe);
     } else {
         // Plastic: the specular coat with probability ∝ its Fresnel reflectance × sampling weight.
         let f_o = fresnel_dielectric(wo.z, m.b.w).r;

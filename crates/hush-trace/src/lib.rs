@@ -19,10 +19,12 @@ mod gpu;
 #[cfg(test)]
 mod probe;
 mod render;
+mod rough;
 mod upload;
 
 pub use gpu::{GpuContext, INSTALL_HINT};
 pub use render::{KERNEL_SOURCE, RenderOutput, RenderSettings, Renderer};
+pub use upload::KernelFeatures;
 
 /// Why a render could not run.
 #[derive(Debug, thiserror::Error)]

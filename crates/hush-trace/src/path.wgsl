@@ -21,9 +21,6 @@ struct Params {
     max_depth: u32,
     tri_count: u32,
     light_count: u32,
-    _pad0: u32,
-    _pad1: u32,
-    _pad2: u32,
 }
 
 // A triangle for intersection. p0.w: material index (bits); e1.w: probability density per
@@ -35,10 +32,13 @@ struct Tri {
 }
 
 // Shading normals at the three vertices; n0.w = 1 for interpolated normals, 0 for flat.
+// Texture coordinates of the vertices: uv01 = (u0, v0, u1, v1), uv2.xy = (u2, v2).
 struct TriNormals {
     n0: vec4<f32>,
     n1: vec4<f32>,
     n2: vec4<f32>,
+    uv01: vec4<f32>,
+    uv2: vec4<f32>,
 }
 
 // Emissive triangles with the cumulative distribution for picking one by power.
@@ -64,6 +64,10 @@ const INV_PI: f32 = 0.318309886183791;
 const RR_DEPTH: u32 = 5u;
 const ACCUM_STRIDE: u32 = 19u;
 const T_MAX: f32 = 3.0e38;
+
+// Specialization (see bsdf.wgsl): textures and the environment.
+override HAS_TEXTURES: bool = true;
+override HAS_ENV: bool = true;
 
 // ---- random numbers: PCG hash (Jarzynski & Olano 2020) ----
 
@@ -249,9 +253,11 @@ struct Sample {
 }
 
 // Albedo, diffuse (k_d) and specular (k_s) features of a material at its first non-delta hit.
-// Diffuse: k_d = reflectance, k_s = 0. Rough conductor: k_d = 0, k_s = specular reflectance ×
-// Fresnel at normal incidence. Plastic: k_d = diffuse reflectance, k_s = specular reflectance ×
-// the coat's Fresnel at normal incidence. Albedo = min(k_d + k_s, 1).
+// Diffuse: k_d = reflectance (textured: the texture's value), k_s = 0. Rough conductor: k_d = 0,
+// k_s = specular reflectance × Fresnel at normal incidence. Plastic (smooth or rough): k_d =
+// diffuse reflectance, k_s = specular reflectance × the coat's Fresnel at normal incidence.
+// Rough dielectric: k_d = 0, k_s = mean of the specular reflectance and transmittance.
+// Albedo = min(k_d + k_s, 1). A ray that escapes to the environment writes 0 to every feature.
 fn features(m: Material) -> mat2x3<f32> {
     let kind = mat_kind(m);
     if kind == KIND_DIFFUSE {
@@ -262,6 +268,11 @@ fn features(m: Material) -> mat2x3<f32> {
     }
     if kind == KIND_PLASTIC {
         return mat2x3<f32>(m.a.xyz, m.b.xyz * fresnel_dielectric(1.0, m.b.w).r);
+    }
+    if kind == KIND_DIELECTRIC {
+        // Rough glass (smooth glass is followed, never a feature): its reflection and
+        // transmission tints, averaged.
+        return mat2x3<f32>(vec3<f32>(0.0), 0.5 * (m.a.xyz + m.b.xyz));
     }
     return mat2x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0));
 }
@@ -284,6 +295,14 @@ fn trace(pixel: vec2<u32>) -> Sample {
     loop {
         let hit = intersect(o, d, T_MAX);
         if hit.tri == NO_HIT {
+            // The environment, weighted against sampling it.
+            if HAS_ENV && env.kind != ENV_NONE {
+                var weight = 1.0;
+                if !prev_delta {
+                    weight = power_heuristic(prev_pdf, env.radiance.w * env_pdf(d));
+                }
+                out.radiance += throughput * env_eval(d) * weight;
+            }
             break;
         }
         let tri = tris[hit.tri];
@@ -300,7 +319,13 @@ fn trace(pixel: vec2<u32>) -> Sample {
                 ns = -ns;
             }
         }
-        let mat = materials[bitcast<u32>(tri.p0.w)];
+        var mat = materials[bitcast<u32>(tri.p0.w)];
+        let tex = bitcast<u32>(mat.e.x);
+        if HAS_TEXTURES && tex != NO_TEXTURE {
+            let w = 1.0 - hit.u - hit.v;
+            let uv = w * nr.uv01.xy + hit.u * nr.uv01.zw + hit.v * nr.uv2.xy;
+            mat.a = vec4<f32>(texture_lookup(tex, uv), mat.a.w);
+        }
         let delta = mat_is_delta(mat);
 
         if !features_done && !delta {
@@ -316,7 +341,7 @@ fn trace(pixel: vec2<u32>) -> Sample {
         if mat.emission.w > 0.5 && front {
             var weight = 1.0;
             if !prev_delta {
-                let light_pdf = tri.e1.w * hit.t * hit.t / dot(ng, -d);
+                let light_pdf = (1.0 - env.radiance.w) * tri.e1.w * hit.t * hit.t / dot(ng, -d);
                 weight = power_heuristic(prev_pdf, light_pdf);
             }
             out.radiance += throughput * mat.emission.xyz * weight;
@@ -331,34 +356,57 @@ fn trace(pixel: vec2<u32>) -> Sample {
         let to_local = transpose(frame);
         let wo = to_local * -d;
 
-        // Next-event estimation: a point on a light picked by power.
-        if params.light_count > 0u && !delta {
-            let light = lights[pick_light(rand())];
-            let lt = tris[light.tri];
-            var a = rand();
-            var b = rand();
-            if a + b > 1.0 {
-                a = 1.0 - a;
-                b = 1.0 - b;
+        // Next-event estimation: the environment with probability env_radiance.w, otherwise
+        // a point on a triangle light picked by power.
+        let env_pick = select(0.0, env.radiance.w, HAS_ENV);
+        if (params.light_count > 0u || env_pick > 0.0) && !delta {
+            var wi = vec3<f32>(0.0);
+            var light_pdf = 0.0;
+            var radiance = vec3<f32>(0.0);
+            var lp = vec3<f32>(0.0);
+            var to_env = true;
+            if rand() < env_pick {
+                let es = env_sample(vec2<f32>(rand(), rand()));
+                wi = es.d;
+                light_pdf = env_pick * es.pdf;
+                radiance = es.radiance;
+            } else {
+                let light = lights[pick_light(rand())];
+                let lt = tris[light.tri];
+                var a = rand();
+                var b = rand();
+                if a + b > 1.0 {
+                    a = 1.0 - a;
+                    b = 1.0 - b;
+                }
+                lp = lt.p0.xyz + a * lt.e1.xyz + b * lt.e2.xyz;
+                to_env = false;
+                let lng = normalize(cross(lt.e1.xyz, lt.e2.xyz));
+                let to_light = lp - p;
+                let dist2 = dot(to_light, to_light);
+                wi = to_light / sqrt(dist2);
+                let cos_light = dot(lng, -wi);
+                if cos_light > 0.0 {
+                    light_pdf = (1.0 - env_pick) * lt.e1.w * dist2 / cos_light;
+                    radiance = materials[bitcast<u32>(lt.p0.w)].emission.xyz;
+                }
             }
-            let lp = lt.p0.xyz + a * lt.e1.xyz + b * lt.e2.xyz;
-            let lng = normalize(cross(lt.e1.xyz, lt.e2.xyz));
-            let to_light = lp - p;
-            let dist2 = dot(to_light, to_light);
-            let wi = to_light / sqrt(dist2);
-            let cos_light = dot(lng, -wi);
             let wi_local = to_local * wi;
             // The shading and geometric normals must agree on the side wi leaves from.
-            if cos_light > 0.0 && dot(ng, wi) * wi_local.z > 0.0 {
+            if light_pdf > 0.0 && dot(ng, wi) * wi_local.z > 0.0 {
                 let f = bsdf_eval(mat, wo, wi_local);
-                if any(f > vec3<f32>(0.0)) {
+                if any(f > vec3<f32>(0.0)) && any(radiance > vec3<f32>(0.0)) {
                     let origin = offset_origin(p, ng, wi);
-                    let to_light2 = lp - origin;
-                    if !occluded(origin, normalize(to_light2), length(to_light2) * (1.0 - 1e-4)) {
-                        let light_pdf = lt.e1.w * dist2 / cos_light;
+                    // Shadow rays to a triangle light end just short of it.
+                    var shadow_d = wi;
+                    var t_max = T_MAX;
+                    if !to_env {
+                        shadow_d = normalize(lp - origin);
+                        t_max = length(lp - origin) * (1.0 - 1e-4);
+                    }
+                    if !occluded(origin, shadow_d, t_max) {
                         let weight = power_heuristic(light_pdf, bsdf_pdf(mat, wo, wi_local));
-                        let lmat = materials[bitcast<u32>(lt.p0.w)];
-                        out.radiance += throughput * f * lmat.emission.xyz * weight / light_pdf;
+                        out.radiance += throughput * f * radiance * weight / light_pdf;
                     }
                 }
             }

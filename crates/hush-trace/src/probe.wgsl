@@ -71,3 +71,47 @@ fn probe_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     probe_out[base + 8u] = fu.z;
     probe_out[base + 9u] = pu;
 }
+
+// Probes the environment: per invocation, one sample of env_sample and one uniformly random
+// direction, so the host can check that env_pdf integrates to 1, that it agrees with the
+// density env_sample reports, and that sampled radiance / pdf estimates the same integral as
+// uniform directions do.
+// Per invocation 8 floats: radiance / pdf of the sample (3), |pdf − env_pdf(d)| / pdf,
+// uniform-direction radiance / p_uniform (3), env_pdf / p_uniform.
+@group(0) @binding(9) var<storage, read_write> env_out: array<f32>;
+
+@compute @workgroup_size(64, 1, 1)
+fn env_probe_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let i = gid.x;
+    if i >= probe.count {
+        return;
+    }
+    var h = hash(i ^ hash(probe.seed));
+    var u: array<f32, 4>;
+    for (var k = 0u; k < 4u; k++) {
+        h = hash(h);
+        u[k] = unit(h);
+    }
+    let s = env_sample(vec2<f32>(u[0], u[1]));
+    var w = vec3<f32>(0.0);
+    var mismatch = 0.0;
+    if s.pdf > 0.0 {
+        w = s.radiance / s.pdf;
+        mismatch = abs(s.pdf - env_pdf(s.d)) / s.pdf;
+    }
+    let z = 1.0 - 2.0 * u[2];
+    let r = sqrt(max(0.0, 1.0 - z * z));
+    let phi = 2.0 * PI * u[3];
+    let wu = vec3<f32>(r * cos(phi), r * sin(phi), z);
+    let inv_p = 4.0 * PI;
+    let lu = env_eval(wu) * inv_p;
+    let base = i * 8u;
+    env_out[base + 0u] = w.x;
+    env_out[base + 1u] = w.y;
+    env_out[base + 2u] = w.z;
+    env_out[base + 3u] = mismatch;
+    env_out[base + 4u] = lu.x;
+    env_out[base + 5u] = lu.y;
+    env_out[base + 6u] = lu.z;
+    env_out[base + 7u] = env_pdf(wu) * inv_p;
+}

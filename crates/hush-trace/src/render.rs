@@ -1,3 +1,5 @@
+use std::collections::HashMap;
+use std::sync::Mutex;
 use std::time::Instant;
 
 use bytemuck::{Pod, Zeroable};
@@ -5,11 +7,11 @@ use hush_dataset::Image;
 use hush_scene::Scene;
 use wgpu::util::DeviceExt;
 
-use crate::upload::{GpuLight, GpuMaterial, GpuNode, GpuNormals, GpuTri, flatten};
+use crate::upload::{GpuLight, GpuMaterial, GpuNode, GpuNormals, GpuTri, KernelFeatures, flatten};
 use crate::{GpuContext, TraceError};
 
 /// The WGSL source of the path-tracing kernel (validated by a test with naga).
-pub const KERNEL_SOURCE: &str = concat!(include_str!("bsdf.wgsl"), include_str!("path.wgsl"));
+pub const KERNEL_SOURCE: &str = concat!(include_str!("bsdf.wgsl"), include_str!("env.wgsl"), include_str!("path.wgsl"));
 
 /// Floats per pixel in the accumulation buffer; mirrors `ACCUM_STRIDE` in the kernel.
 const ACCUM_STRIDE: usize = 19;
@@ -49,7 +51,8 @@ pub struct RenderOutput {
     pub spp: u32,
     /// Non-finite path samples the kernel discarded (0 in a correct render).
     pub discarded_samples: u64,
-    /// Wall-clock seconds spent tracing (upload and read-back included).
+    /// Wall-clock seconds spent tracing (upload and read-back included; compiling the kernel
+    /// specialized to the scene, once per set of features, is not).
     pub seconds: f64,
 }
 
@@ -72,33 +75,71 @@ struct Params {
     pad: [u32; 3],
 }
 
-/// Compiled kernels on one device.
+/// Compiled kernels on one device: the generic kernel and one specialized per set of
+/// [`KernelFeatures`] rendered so far.
 #[derive(Debug)]
 pub struct Renderer<'a> {
     gpu: &'a GpuContext,
-    pipeline: wgpu::ComputePipeline,
+    module: wgpu::ShaderModule,
+    generic: bool,
+    pipelines: Mutex<HashMap<KernelFeatures, wgpu::ComputePipeline>>,
 }
 
 impl<'a> Renderer<'a> {
-    /// Compiles the kernel. A shader the driver rejects is an error, not a panic.
+    /// Compiles the generic kernel. A shader the driver rejects is an error, not a panic.
     pub fn new(gpu: &'a GpuContext) -> Result<Renderer<'a>, TraceError> {
         let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = gpu.device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("path.wgsl"),
             source: wgpu::ShaderSource::Wgsl(KERNEL_SOURCE.into()),
         });
-        let pipeline = gpu.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("path"),
-            layout: None,
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(TraceError::Gpu(format!("the path-tracing kernel does not compile on {}: {e}", gpu.info.name)));
         }
-        Ok(Renderer { gpu, pipeline })
+        let renderer = Renderer { gpu, module, generic: false, pipelines: Mutex::new(HashMap::new()) };
+        renderer.pipeline(KernelFeatures::ALL)?;
+        Ok(renderer)
+    }
+
+    /// With `true`, every scene renders with the generic kernel (all features compiled in)
+    /// instead of one specialized to the scene: the same image, for speed comparisons.
+    pub fn with_generic_kernel(mut self, generic: bool) -> Self {
+        self.generic = generic;
+        self
+    }
+
+    /// The kernel specialized to `features` (pipeline-overridable constants), compiled once.
+    fn pipeline(&self, features: KernelFeatures) -> Result<wgpu::ComputePipeline, TraceError> {
+        let mut pipelines = self.pipelines.lock().map_err(|_| TraceError::Gpu("a render panicked".into()))?;
+        if let Some(p) = pipelines.get(&features) {
+            return Ok(p.clone());
+        }
+        let flag = |b: bool| if b { 1.0 } else { 0.0 };
+        let constants = [
+            ("HAS_TEXTURES", flag(features.textures)),
+            ("HAS_ENV", flag(features.environment)),
+            ("HAS_ROUGH_DIELECTRIC", flag(features.rough_dielectric)),
+            ("HAS_ROUGH_PLASTIC", flag(features.rough_plastic)),
+            ("HAS_BECKMANN", flag(features.beckmann)),
+        ];
+        let device = &self.gpu.device;
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("path"),
+            layout: None,
+            module: &self.module,
+            entry_point: Some("main"),
+            compilation_options: wgpu::PipelineCompilationOptions { constants: &constants, ..Default::default() },
+            cache: None,
+        });
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(TraceError::Gpu(format!(
+                "the path-tracing kernel ({features:?}) does not compile on {}: {e}",
+                self.gpu.info.name
+            )));
+        }
+        pipelines.insert(features, pipeline.clone());
+        Ok(pipeline)
     }
 
     /// Renders `scene` with `settings.spp` paths per pixel. `progress(done, total)` is called
@@ -109,7 +150,7 @@ impl<'a> Renderer<'a> {
         settings: &RenderSettings,
         progress: &mut dyn FnMut(u32, u32),
     ) -> Result<RenderOutput, TraceError> {
-        let start = Instant::now();
+        let mut start = Instant::now();
         let (w, h) = (scene.film.width, scene.film.height);
         if settings.spp == 0 {
             return Err(TraceError::Invalid("--spp must be at least 1".into()));
@@ -123,7 +164,7 @@ impl<'a> Renderer<'a> {
         scene.camera.validate().map_err(TraceError::Invalid)?;
         let pixels = w as u64 * h as u64;
         let accum_bytes = pixels * (ACCUM_STRIDE * 4) as u64;
-        let limit = self.gpu.device.limits().max_storage_buffer_binding_size as u64;
+        let limit = self.gpu.device.limits().max_storage_buffer_binding_size;
         if accum_bytes > limit {
             return Err(TraceError::Invalid(format!(
                 "{w}×{h} needs {accum_bytes} bytes of accumulation buffer; this device allows {limit}: render a smaller image"
@@ -152,6 +193,19 @@ impl<'a> Renderer<'a> {
         let materials = storage("materials", bytemuck::cast_slice::<GpuMaterial, u8>(&flat.materials));
         let lights = storage("lights", bytemuck::cast_slice::<GpuLight, u8>(&flat.lights));
         let nodes = storage("bvh", bytemuck::cast_slice::<GpuNode, u8>(&flat.nodes));
+        let aux_bytes = flat.aux.len() as u64 * 4;
+        if aux_bytes > limit {
+            return Err(TraceError::Invalid(format!(
+                "the scene's textures and tables take {aux_bytes} bytes; this device binds at most {limit}: \
+                 use smaller textures"
+            )));
+        }
+        let aux = storage("aux", bytemuck::cast_slice::<f32, u8>(&flat.aux));
+        let env = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("env"),
+            contents: bytemuck::bytes_of(&flat.env.uniform()),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
         let accum = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("accum"),
             size: accum_bytes,
@@ -170,7 +224,11 @@ impl<'a> Renderer<'a> {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let layout = self.pipeline.get_bind_group_layout(0);
+        let features = if self.generic { KernelFeatures::ALL } else { flat.features };
+        let compile = Instant::now();
+        let pipeline = self.pipeline(features)?;
+        start += compile.elapsed();
+        let layout = pipeline.get_bind_group_layout(0);
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("path"),
             layout: &layout,
@@ -182,6 +240,8 @@ impl<'a> Renderer<'a> {
                 wgpu::BindGroupEntry { binding: 4, resource: lights.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 5, resource: accum.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 6, resource: nodes.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 7, resource: aux.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 8, resource: env.as_entire_binding() },
             ],
         });
 
@@ -216,7 +276,7 @@ impl<'a> Renderer<'a> {
             {
                 let mut pass = encoder
                     .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("path"), timestamp_writes: None });
-                pass.set_pipeline(&self.pipeline);
+                pass.set_pipeline(&pipeline);
                 pass.set_bind_group(0, &bind_group, &[]);
                 pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
             }

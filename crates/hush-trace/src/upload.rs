@@ -1,10 +1,13 @@
 //! Flattens a [`Scene`] into the arrays the kernel reads.
 
+use std::collections::HashMap;
+
 use bytemuck::{Pod, Zeroable};
-use glam::Vec3;
-use hush_scene::{Bvh, BvhNode, Environment, Material, Reflectance, Scene};
+use glam::{Mat3, Vec2, Vec3};
+use hush_scene::{Bvh, BvhNode, Environment, Material, Microfacet, Reflectance, Scene, Texture, TextureId};
 
 use crate::TraceError;
+use crate::rough::plastic_tables;
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -14,10 +17,13 @@ pub(crate) struct GpuTri {
     pub e2: [f32; 4],
 }
 
+/// Shading normals (`w` = 1 when interpolated) and texture coordinates of a triangle's corners.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
 pub(crate) struct GpuNormals {
     pub n: [[f32; 4]; 3],
+    pub uv01: [f32; 4],
+    pub uv2: [f32; 4],
 }
 
 /// Mirrors `Material` in bsdf.wgsl, which documents each field.
@@ -29,6 +35,7 @@ pub(crate) struct GpuMaterial {
     pub c: [f32; 4],
     pub d: [f32; 4],
     pub emission: [f32; 4],
+    pub e: [f32; 4],
 }
 
 // BSDF kinds and flags; mirror the constants in bsdf.wgsl.
@@ -39,79 +46,152 @@ const KIND_THIN_DIELECTRIC: u32 = 3;
 const KIND_PLASTIC: u32 = 4;
 const FLAG_TWO_SIDED: u32 = 1;
 const FLAG_NONLINEAR: u32 = 2;
+const FLAG_BECKMANN: u32 = 4;
 
-/// The kernel's record of a material, or why the kernel cannot render it yet.
-pub(crate) fn gpu_material(m: &Material, emission: Vec3, shape: &str) -> Result<GpuMaterial, TraceError> {
-    let unsupported = |what: &str| {
-        Err(TraceError::Invalid(format!("material '{what}' of shape '{shape}' is not supported by the kernel yet")))
-    };
-    let rgb = |r: &Reflectance| match r {
-        Reflectance::Rgb(v) => Ok(*v),
-        Reflectance::Texture(_) => Err(()),
+/// `e.x` of a material without a texture; mirrors `NO_TEXTURE` in the kernel.
+pub(crate) const NO_TEXTURE: u32 = u32::MAX;
+
+/// The kernel's auxiliary float array (`aux` in path.wgsl): images (textures, an environment
+/// map) and tables, each at an offset that the records using it store as bits.
+///
+/// An image is a header (width and height, as bits) followed by its linear RGB texels, rows
+/// top to bottom.
+#[derive(Default)]
+pub(crate) struct Aux {
+    pub data: Vec<f32>,
+    textures: HashMap<u32, u32>,
+    plastic_tables: HashMap<(u32, u32, bool), (u32, f32)>,
+}
+
+impl Aux {
+    /// Appends an image; returns its offset.
+    pub fn push_image(&mut self, width: u32, height: u32, texels: &[f32]) -> u32 {
+        let offset = self.offset();
+        self.data.push(f32::from_bits(width));
+        self.data.push(f32::from_bits(height));
+        self.data.extend_from_slice(texels);
+        offset
+    }
+
+    /// The offset of a scene texture, uploaded on first use.
+    fn texture(&mut self, id: TextureId, textures: &[Texture]) -> Result<(u32, Vec3), TraceError> {
+        let t = textures.get(id.0 as usize).ok_or_else(|| {
+            TraceError::Invalid(format!("texture {} is referenced but the scene holds {}", id.0, textures.len()))
+        })?;
+        if let Some(&offset) = self.textures.get(&id.0) {
+            return Ok((offset, t.mean()));
+        }
+        let offset = self.push_image(t.width, t.height, &t.data);
+        self.textures.insert(id.0, offset);
+        Ok((offset, t.mean()))
+    }
+
+    /// The offset of a rough plastic's coat-transmittance table and its internal reflectance.
+    fn plastic(&mut self, dist: Microfacet, alpha: f32, eta: f32) -> (u32, f32) {
+        let key = (alpha.to_bits(), eta.to_bits(), dist == Microfacet::Beckmann);
+        if let Some(&t) = self.plastic_tables.get(&key) {
+            return t;
+        }
+        let (table, internal) = plastic_tables(dist, alpha, eta);
+        let offset = self.offset();
+        self.data.extend_from_slice(&table);
+        self.plastic_tables.insert(key, (offset, internal));
+        (offset, internal)
+    }
+
+    /// The next offset.
+    pub fn offset(&self) -> u32 {
+        self.data.len() as u32
+    }
+}
+
+/// The kernel's record of a material. Textures and tables it reads are appended to `aux`.
+pub(crate) fn gpu_material(
+    m: &Material,
+    emission: Vec3,
+    textures: &[Texture],
+    aux: &mut Aux,
+) -> Result<GpuMaterial, TraceError> {
+    // A reflectance as (constant colour or texture mean, texture offset or NO_TEXTURE).
+    let mut reflectance = |r: &Reflectance| match *r {
+        Reflectance::Rgb(v) => Ok((v, NO_TEXTURE)),
+        Reflectance::Texture(id) => aux.texture(id, textures).map(|(offset, mean)| (mean, offset)),
     };
     let bits = |kind: u32, flags: u32| f32::from_bits(kind | flags << 8);
     let two = |t: bool| if t { FLAG_TWO_SIDED } else { 0 };
+    let beckmann = |d: Microfacet| if d == Microfacet::Beckmann { FLAG_BECKMANN } else { 0 };
     let zero = [0.0; 4];
     let emits = emission.max_element() > 0.0;
     let emission = v4(emission, emits as u32 as f32);
+    let no_texture = [f32::from_bits(NO_TEXTURE), 0.0, 0.0, 0.0];
     Ok(match *m {
-        Material::Diffuse { ref reflectance, two_sided } => {
-            let Ok(r) = rgb(reflectance) else { return unsupported("textured diffuse") };
+        Material::Diffuse { reflectance: ref r, two_sided } => {
+            let (r, tex) = reflectance(r)?;
             GpuMaterial {
                 a: v4(r, 0.0),
                 b: zero,
                 c: v4(Vec3::ZERO, bits(KIND_DIFFUSE, two(two_sided))),
                 d: zero,
                 emission,
+                e: [f32::from_bits(tex), 0.0, 0.0, 0.0],
             }
         }
-        Material::Conductor { alpha, ior, specular_reflectance, two_sided } => {
+        Material::Conductor { alpha, distribution, ior, specular_reflectance, two_sided } => {
             // Without an index of refraction, a perfect mirror (eta 0, k 1 gives F = 1).
             let ior = ior.unwrap_or(hush_scene::ComplexIor { eta: Vec3::ZERO, k: Vec3::ONE });
             GpuMaterial {
                 a: v4(specular_reflectance, alpha),
                 b: zero,
-                c: v4(ior.eta, bits(KIND_CONDUCTOR, two(two_sided))),
+                c: v4(ior.eta, bits(KIND_CONDUCTOR, two(two_sided) | beckmann(distribution))),
                 d: v4(ior.k, 0.0),
                 emission,
+                e: no_texture,
             }
         }
-        Material::Dielectric { alpha, int_ior, ext_ior, thin, specular_reflectance, specular_transmittance } => {
-            if alpha > 0.0 && !thin {
-                return unsupported("roughdielectric");
-            }
+        Material::Dielectric {
+            alpha,
+            distribution,
+            int_ior,
+            ext_ior,
+            thin,
+            specular_reflectance,
+            specular_transmittance,
+        } => {
             let kind = if thin { KIND_THIN_DIELECTRIC } else { KIND_DIELECTRIC };
             GpuMaterial {
-                a: v4(specular_reflectance, 0.0),
+                a: v4(specular_reflectance, if thin { 0.0 } else { alpha }),
                 b: v4(specular_transmittance, int_ior / ext_ior),
-                c: v4(Vec3::ZERO, bits(kind, FLAG_TWO_SIDED)),
+                c: v4(Vec3::ZERO, bits(kind, FLAG_TWO_SIDED | beckmann(distribution))),
                 d: zero,
                 emission,
+                e: no_texture,
             }
         }
         Material::Plastic {
             ref diffuse_reflectance,
             specular_reflectance,
             alpha,
+            distribution,
             int_ior,
             ext_ior,
             nonlinear,
             two_sided,
         } => {
-            if alpha > 0.0 {
-                return unsupported("roughplastic");
-            }
-            let Ok(diffuse) = rgb(diffuse_reflectance) else { return unsupported("textured plastic") };
-            // Mitsuba's plastic picks the coat with weight mean(ks) / (mean(kd) + mean(ks)).
+            let (diffuse, tex) = reflectance(diffuse_reflectance)?;
+            let eta = int_ior / ext_ior;
+            let (table, internal) = if alpha > 0.0 { aux.plastic(distribution, alpha, eta) } else { (0, 0.0) };
+            // Mitsuba's plastic picks the coat with weight mean(ks) / (mean(kd) + mean(ks)),
+            // a texture's mean standing for kd.
             let (dm, sm) = (diffuse.element_sum() / 3.0, specular_reflectance.element_sum() / 3.0);
             let weight = if dm + sm > 0.0 { sm / (dm + sm) } else { 0.5 };
-            let flags = two(two_sided) | if nonlinear { FLAG_NONLINEAR } else { 0 };
+            let flags = two(two_sided) | if nonlinear { FLAG_NONLINEAR } else { 0 } | beckmann(distribution);
             GpuMaterial {
-                a: v4(diffuse, 0.0),
-                b: v4(specular_reflectance, int_ior / ext_ior),
+                a: v4(diffuse, alpha),
+                b: v4(specular_reflectance, eta),
                 c: v4(Vec3::ZERO, bits(KIND_PLASTIC, flags)),
                 d: v4(Vec3::ZERO, weight),
                 emission,
+                e: [f32::from_bits(tex), f32::from_bits(table), internal, 0.0],
             }
         }
     })
@@ -140,6 +220,142 @@ impl From<BvhNode> for GpuNode {
     }
 }
 
+// Environment kinds; mirror ENV_* in path.wgsl.
+pub(crate) const ENV_NONE: u32 = 0;
+pub(crate) const ENV_CONSTANT: u32 = 1;
+pub(crate) const ENV_MAP: u32 = 2;
+
+/// The environment as the kernel sees it (fields of `Params`).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct GpuEnv {
+    pub kind: u32,
+    /// Offset of the map's image in `aux`.
+    pub image: u32,
+    /// Offset of its sampling distribution: the marginal CDF over the height − 1 rows of
+    /// interpolation cells, then one conditional CDF over the width cells of each row.
+    pub dist: u32,
+    /// Constant radiance, or the map's scale on every channel.
+    pub radiance: Vec3,
+    /// Probability that next-event estimation samples the environment rather than a triangle.
+    pub pick: f32,
+    pub to_world: Mat3,
+    pub to_local: Mat3,
+}
+
+/// Mirrors `Env` in env.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub(crate) struct GpuEnvUniform {
+    pub kind: u32,
+    pub image: u32,
+    pub dist: u32,
+    pub pad: u32,
+    pub radiance: [f32; 4],
+    pub to_world: [[f32; 4]; 3],
+    pub to_local: [[f32; 4]; 3],
+}
+
+impl GpuEnv {
+    pub fn uniform(&self) -> GpuEnvUniform {
+        let columns = |m: Mat3| [m.x_axis, m.y_axis, m.z_axis].map(|c| v4(c, 0.0));
+        GpuEnvUniform {
+            kind: self.kind,
+            image: self.image,
+            dist: self.dist,
+            pad: 0,
+            radiance: v4(self.radiance, self.pick),
+            to_world: columns(self.to_world),
+            to_local: columns(self.to_local),
+        }
+    }
+}
+
+/// Mitsuba's luminance weights for linear sRGB.
+fn luminance(rgb: &[f32]) -> f64 {
+    0.212671 * rgb[0] as f64 + 0.715160 * rgb[1] as f64 + 0.072169 * rgb[2] as f64
+}
+
+/// Appends a CDF of `weights` (normalized; uniform if they are all 0) and returns their sum.
+fn push_cdf(aux: &mut Vec<f32>, weights: &[f64]) -> f64 {
+    let total: f64 = weights.iter().sum();
+    let mut running = 0.0;
+    for (i, &w) in weights.iter().enumerate() {
+        running += if total > 0.0 { w / total } else { 1.0 / weights.len() as f64 };
+        aux.push(if i + 1 == weights.len() { 1.0 } else { running as f32 });
+    }
+    total
+}
+
+/// Uploads the scene's environment. An environment map is sampled in proportion to the
+/// luminance of its interpolation cells (the mean of their four corner texels) times sin θ at
+/// the cell centre; the kernel's pdf follows the same cells, so any weighting is unbiased.
+pub(crate) fn environment(
+    environment: Option<&Environment>,
+    aux: &mut Aux,
+    has_lights: bool,
+) -> Result<GpuEnv, TraceError> {
+    let mut env = GpuEnv {
+        kind: ENV_NONE,
+        image: 0,
+        dist: 0,
+        radiance: Vec3::ZERO,
+        pick: 0.0,
+        to_world: Mat3::IDENTITY,
+        to_local: Mat3::IDENTITY,
+    };
+    let pick = if has_lights { 0.5 } else { 1.0 };
+    match environment {
+        None => {}
+        Some(Environment::Constant { radiance }) => {
+            env.kind = ENV_CONSTANT;
+            env.radiance = *radiance;
+            env.pick = if radiance.max_element() > 0.0 { pick } else { 0.0 };
+        }
+        Some(Environment::Map(map)) => {
+            let (w, h) = (map.width as usize, map.height as usize);
+            if w < 1 || h < 2 || map.data.len() != w * h * 3 {
+                return Err(TraceError::Invalid(format!(
+                    "environment map {} is {w}×{h}: it needs at least 2 rows of RGB pixels",
+                    map.path.display()
+                )));
+            }
+            let linear = Mat3::from_mat4(map.to_world);
+            if linear.determinant().abs() < 1e-12 || !linear.is_finite() {
+                return Err(TraceError::Invalid(format!(
+                    "environment map {}: its to_world transform is singular",
+                    map.path.display()
+                )));
+            }
+            env.kind = ENV_MAP;
+            env.radiance = Vec3::splat(map.scale);
+            env.to_world = linear;
+            env.to_local = linear.inverse();
+            env.image = aux.push_image(map.width, map.height, &map.data);
+            let lum: Vec<f64> = map.data.chunks_exact(3).map(luminance).collect();
+            let ny = h - 1;
+            let mut rows = Vec::with_capacity(ny);
+            let mut cells = vec![0.0f64; w];
+            let mut conditional = Vec::with_capacity(ny * w);
+            for y in 0..ny {
+                let sin_theta = (std::f64::consts::PI * (y as f64 + 0.5) / ny as f64).sin();
+                for (x, c) in cells.iter_mut().enumerate() {
+                    let x1 = (x + 1) % w;
+                    let l = lum[y * w + x] + lum[y * w + x1] + lum[(y + 1) * w + x] + lum[(y + 1) * w + x1];
+                    *c = 0.25 * l * sin_theta;
+                }
+                let mut tmp = Vec::with_capacity(w);
+                rows.push(push_cdf(&mut tmp, &cells));
+                conditional.extend(tmp);
+            }
+            env.dist = aux.offset();
+            let total = push_cdf(&mut aux.data, &rows);
+            aux.data.extend(conditional);
+            env.pick = if total > 0.0 && map.scale > 0.0 { pick } else { 0.0 };
+        }
+    }
+    Ok(env)
+}
+
 /// The kernel's traversal stack; mirrors `STACK_SIZE` in the kernel.
 const STACK_SIZE: usize = 64;
 
@@ -149,6 +365,61 @@ pub(crate) struct GpuScene {
     pub normals: Vec<GpuNormals>,
     pub materials: Vec<GpuMaterial>,
     pub lights: Vec<GpuLight>,
+    pub aux: Vec<f32>,
+    pub env: GpuEnv,
+    pub features: KernelFeatures,
+}
+
+/// What of the kernel a scene uses; the renderer compiles the rest out.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct KernelFeatures {
+    pub textures: bool,
+    pub environment: bool,
+    pub rough_dielectric: bool,
+    pub rough_plastic: bool,
+    pub beckmann: bool,
+}
+
+impl KernelFeatures {
+    /// The generic kernel.
+    pub const ALL: KernelFeatures = KernelFeatures {
+        textures: true,
+        environment: true,
+        rough_dielectric: true,
+        rough_plastic: true,
+        beckmann: true,
+    };
+    /// None of the optional features (diffuse, smooth and GGX-rough conductors, smooth and
+    /// thin glass, smooth plastic, triangle lights remain).
+    pub const NONE: KernelFeatures = KernelFeatures {
+        textures: false,
+        environment: false,
+        rough_dielectric: false,
+        rough_plastic: false,
+        beckmann: false,
+    };
+
+    /// The features `scene` uses.
+    pub fn of(scene: &Scene) -> KernelFeatures {
+        let mut f = KernelFeatures { environment: scene.environment.is_some(), ..KernelFeatures::NONE };
+        for m in scene.meshes.iter().map(|m| &m.material) {
+            f.textures |= m.texture().is_some();
+            let (alpha, distribution) = match *m {
+                Material::Conductor { alpha, distribution, .. } => (alpha, distribution),
+                Material::Dielectric { alpha, distribution, thin: false, .. } => {
+                    f.rough_dielectric |= alpha > 0.0;
+                    (alpha, distribution)
+                }
+                Material::Plastic { alpha, distribution, .. } => {
+                    f.rough_plastic |= alpha > 0.0;
+                    (alpha, distribution)
+                }
+                _ => continue,
+            };
+            f.beckmann |= alpha > 0.0 && distribution == Microfacet::Beckmann;
+        }
+        f
+    }
 }
 
 fn v4(v: Vec3, w: f32) -> [f32; 4] {
@@ -164,17 +435,12 @@ pub(crate) fn flatten(scene: &Scene) -> Result<GpuScene, TraceError> {
     let mut normals = Vec::with_capacity(scene.triangle_count());
     let mut materials = Vec::with_capacity(scene.meshes.len());
     let mut light_weights = Vec::new();
-    if let Some(env) = &scene.environment {
-        let what = match env {
-            Environment::Constant { .. } => "constant",
-            Environment::Map(_) => "envmap",
-        };
-        return Err(TraceError::Invalid(format!("emitter '{what}' is not supported by the kernel yet")));
-    }
+    let mut aux = Aux::default();
     for (mi, mesh) in scene.meshes.iter().enumerate() {
         let emission = mesh.emission.unwrap_or(Vec3::ZERO);
         let emits = emission.max_element() > 0.0;
-        materials.push(gpu_material(&mesh.material, emission, &mesh.name)?);
+        materials.push(gpu_material(&mesh.material, emission, &scene.textures, &mut aux)?);
+        let uv = |k: u32| mesh.uvs.as_ref().map_or(Vec2::ZERO, |u| u[k as usize]);
         for (ti, idx) in mesh.indices.iter().enumerate() {
             // Mitsuba takes a surface's front side (for one-sided BSDFs and emitters) from its
             // shading normal when the mesh has vertex normals: wind such triangles so that the
@@ -192,9 +458,14 @@ pub(crate) fn flatten(scene: &Scene) -> Result<GpuScene, TraceError> {
                 light_weights.push((tris.len() as u32, mesh.triangle_area(ti) * emission.element_sum()));
             }
             tris.push(GpuTri { p0: v4(a, f32::from_bits(mi as u32)), e1: v4(b - a, 0.0), e2: v4(c - a, 0.0) });
-            normals.push(match &mesh.normals {
-                Some(n) => GpuNormals { n: idx.map(|k| v4(n[k as usize], 1.0)) },
-                None => GpuNormals { n: [[0.0; 4]; 3] },
+            let [t0, t1, t2] = idx.map(uv);
+            normals.push(GpuNormals {
+                n: match &mesh.normals {
+                    Some(n) => idx.map(|k| v4(n[k as usize], 1.0)),
+                    None => [[0.0; 4]; 3],
+                },
+                uv01: [t0.x, t0.y, t1.x, t1.y],
+                uv2: [t2.x, t2.y, 0.0, 0.0],
             });
         }
     }
@@ -236,5 +507,6 @@ pub(crate) fn flatten(scene: &Scene) -> Result<GpuScene, TraceError> {
         last.cdf = 1.0;
     }
     let nodes = bvh.nodes.into_iter().map(GpuNode::from).collect();
-    Ok(GpuScene { nodes, tris, normals, materials, lights })
+    let env = environment(scene.environment.as_ref(), &mut aux, !lights.is_empty())?;
+    Ok(GpuScene { nodes, tris, normals, materials, lights, aux: aux.data, env, features: KernelFeatures::of(scene) })
 }

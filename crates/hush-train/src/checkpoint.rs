@@ -3,13 +3,12 @@
 //! beside them (`optim.<slot>.<name>`) and the training state (step, epoch, crops drawn, best test loss,
 //! the configuration) as JSON metadata. Everything a run needs to continue exactly.
 
-use std::borrow::Cow;
 use std::collections::HashMap;
 
-use candle_core::{DType, Device, Tensor};
+use candle_core::Device;
 use candle_nn::VarMap;
-use hush_net::METADATA_KEY;
-use safetensors::tensor::{Dtype, SafeTensors, View};
+use hush_net::{F32View, METADATA_KEY};
+use safetensors::tensor::SafeTensors;
 use serde::{Deserialize, Serialize};
 
 use crate::{Optimizer, Result, TrainConfig, TrainError};
@@ -34,32 +33,6 @@ pub struct TrainState {
     pub config: TrainConfig,
 }
 
-/// An owned little-endian f32 buffer with a shape, for `safetensors::serialize`.
-struct F32View {
-    shape: Vec<usize>,
-    bytes: Vec<u8>,
-}
-
-impl View for F32View {
-    fn dtype(&self) -> Dtype {
-        Dtype::F32
-    }
-    fn shape(&self) -> &[usize] {
-        &self.shape
-    }
-    fn data(&self) -> Cow<'_, [u8]> {
-        Cow::Borrowed(&self.bytes)
-    }
-    fn data_len(&self) -> usize {
-        self.bytes.len()
-    }
-}
-
-fn view(t: &Tensor) -> Result<F32View> {
-    let values = t.to_dtype(DType::F32)?.flatten_all()?.to_vec1::<f32>()?;
-    Ok(F32View { shape: t.dims().to_vec(), bytes: values.iter().flat_map(|v| v.to_le_bytes()).collect() })
-}
-
 fn to_json<T: Serialize>(v: &T) -> Result<String> {
     serde_json::to_string(v).map_err(|e| TrainError::Config(format!("cannot serialize the training state: {e}")))
 }
@@ -71,11 +44,11 @@ pub(crate) fn save_checkpoint(varmap: &VarMap, opt: &Optimizer, state: &TrainSta
     {
         let vars = varmap.data().lock().map_err(|_| candle_core::Error::Msg("VarMap lock poisoned".into()))?;
         for (name, var) in vars.iter() {
-            views.push((name.clone(), view(var.as_tensor())?));
+            views.push((name.clone(), F32View::of(var.as_tensor())?));
         }
     }
     for (name, t) in opt.state() {
-        views.push((name, view(&t)?));
+        views.push((name, F32View::of(&t)?));
     }
     views.sort_by(|a, b| a.0.cmp(&b.0));
     let metadata =

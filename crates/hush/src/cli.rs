@@ -2,6 +2,7 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
 
+pub use crate::bench_cmd::BenchArgs;
 pub use crate::dataset_cmd::DatasetArgs;
 pub use crate::scene_cmd::SceneArgs;
 pub use crate::train_cmd::TrainArgs;
@@ -30,8 +31,12 @@ pub enum Command {
     Train(TrainArgs),
     /// Denoise one image with a trained model.
     Denoise(DenoiseArgs),
-    /// Evaluate models against the noisy input on a dataset's test split.
+    /// Evaluate models and baselines against the noisy input on a dataset's test split: metrics, error
+    /// against run time, pictures and a report.
     Eval(EvalArgs),
+    /// Measurements behind `cargo xtask bench net` (JSON on stdout).
+    #[command(hide = true)]
+    Bench(BenchArgs),
 }
 
 /// Camera and image overrides shared by `render` and `dataset`.
@@ -81,6 +86,10 @@ pub struct RenderArgs {
     /// Write timing statistics (paths, wall and CPU seconds, adapter) as JSON.
     #[arg(long)]
     pub stats: Option<PathBuf>,
+    /// Render with the generic kernel instead of one specialized to the scene (same image;
+    /// for speed comparisons).
+    #[arg(long)]
+    pub generic: bool,
 }
 
 #[derive(Args, Debug)]
@@ -110,13 +119,17 @@ pub struct EvalArgs {
     /// Dataset folder (from `hush dataset`); its test split is evaluated.
     #[arg(long)]
     pub dataset: PathBuf,
-    /// Trained models to evaluate (.safetensors).
+    /// Trained models to evaluate (.safetensors, or OIDN's .tza weights); repeatable.
     #[arg(long = "model")]
     pub models: Vec<PathBuf>,
+    /// Baselines to evaluate by name; repeatable or comma-separated. `noisy` (raw path tracing) is always
+    /// evaluated; `all` asks for every known baseline; an unknown name is an error listing the known ones.
+    #[arg(long = "baseline", value_delimiter = ',')]
+    pub baselines: Vec<String>,
     /// Noisy inputs at these spp (all stored ones if not given).
     #[arg(long, value_delimiter = ',')]
     pub spp: Vec<u32>,
-    /// Report folder: report.md, summary.json and PNG previews.
+    /// Report folder: report.md, report.html, summary.json, error_vs_time.csv, plots, pictures and previews.
     #[arg(long)]
     pub out: PathBuf,
     /// Denoise timing: median of this many warm runs.

@@ -1,5 +1,6 @@
 //! `hush`: render scenes, build datasets, train denoisers, denoise images and evaluate them.
 
+mod bench_cmd;
 mod cli;
 mod cpu;
 mod dataset_cmd;
@@ -21,6 +22,7 @@ fn main() {
         cli::Command::Train(args) => train_cmd::run(args),
         cli::Command::Denoise(args) => denoise_cmd::run(args),
         cli::Command::Eval(args) => eval_cmd::run(args),
+        cli::Command::Bench(args) => bench_cmd::run(args),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

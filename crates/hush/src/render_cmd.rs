@@ -90,7 +90,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     }
     let scene = load_scene(&args.scene, &args.view)?;
     let gpu = open_gpu()?;
-    let renderer = Renderer::new(&gpu)?;
+    let renderer = Renderer::new(&gpu)?.with_generic_kernel(args.generic);
     let cpu0 = cpu_seconds();
     let out = render_with_progress(&renderer, &scene, &RenderSettings { spp: args.spp, seed: args.seed }, "render")?;
     let cpu = cpu_seconds() - cpu0;

@@ -1,10 +1,17 @@
 //! Integration tests of hush-eval (one binary, modules by topic).
 
+mod external;
+mod flip;
 mod golden;
+mod guided;
+mod html;
 mod metrics;
+mod pictures;
+mod reference_checks;
 mod report;
 mod timing;
 mod tonemap;
+mod tradeoff;
 
 use std::path::{Path, PathBuf};
 

@@ -93,3 +93,25 @@ fn mitsuba_renders_improve_with_spp() {
     let ratio = m16.rel_mse / m64.rel_mse;
     assert!((3.3..4.5).contains(&ratio), "relMSE 16/64 spp = {ratio}");
 }
+
+/// MS-SSIM is reported only where its 5 scales fit (a side of at least 176 px), and then agrees with
+/// hush-net's loss code on the tonemapped images.
+#[test]
+fn ms_ssim_needs_five_scales() {
+    assert_eq!(hush_eval::MS_SSIM_MIN_SIDE, 176);
+    let small = Image::from_fn(175, 200, 3, |x, y, _| 0.1 + 0.001 * (x + y) as f32);
+    assert_eq!(compare(&small, &small).unwrap().ms_ssim, None);
+    let reference = Image::from_fn(176, 180, 3, |x, y, c| 0.1 + 0.002 * ((x * 7 + y * 3 + c) % 50) as f32);
+    let mut test = reference.clone();
+    for (i, v) in test.data.iter_mut().enumerate() {
+        *v *= 1.0 + 0.3 * ((i * 2_654_435_761) % 1000) as f32 / 1000.0;
+    }
+    assert!((compare(&reference, &reference).unwrap().ms_ssim.unwrap() - 1.0).abs() < 1e-5);
+    let m = compare(&test, &reference).unwrap();
+    let exposure = hush_eval::exposure_of(&reference).unwrap();
+    let direct =
+        hush_eval::ms_ssim_tonemapped(&hush_eval::tonemap(&test, exposure), &hush_eval::tonemap(&reference, exposure));
+    let ms = m.ms_ssim.unwrap();
+    assert_eq!(Some(ms), direct.unwrap());
+    assert!(ms < 1.0 && ms > m.ssim, "noise hurts the finest scale most: MS-SSIM {ms} vs SSIM {}", m.ssim);
+}

@@ -70,6 +70,18 @@ fn thesis_capacities_m1_and_m2() {
     assert!(full > m1 && m1 > m2, "{full} {m1} {m2}");
 }
 
+/// Multiply-adds per forward pass: OIDN's `unet` on 9 channels at 512² is 65.75 GFLOP (2 FLOP per
+/// multiply-add) in `../shared/docs/anchors.md`, i.e. 125,406 multiply-adds per pixel; halving each side
+/// quarters the count, and the autoencoder (no concatenated skips) does fewer.
+#[test]
+fn multiply_adds_match_oidn_count() {
+    let unet = UNetConfig::oidn(9);
+    assert_eq!(unet.multiply_adds(512, 512), 125_406 * 512 * 512);
+    assert_eq!(unet.multiply_adds(256, 256) * 4, unet.multiply_adds(512, 512));
+    assert!(UNetConfig::thesis_dae(9).multiply_adds(64, 64) < unet.multiply_adds(64, 64));
+    assert!(UNetConfig::thesis_m2(9).multiply_adds(64, 64) < UNetConfig::thesis_m1(9).multiply_adds(64, 64));
+}
+
 /// Layer names, shapes and parameter counts of every kind, checked against OIDN's own weight files
 /// (`rt_hdr*.tza`: 914,627 / 917,219 / 919,811 for `unet` with 3 / 6 / 9 inputs, 320,035 for
 /// `unet_small`, 3,848,387 for `unet_large`).

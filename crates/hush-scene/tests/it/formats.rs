@@ -151,7 +151,8 @@ fn gltf_metal_and_unsupported_extension() {
     let material = r#"{"pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.6, 0.2, 1], "metallicFactor": 1, "roughnessFactor": 0.3}, "doubleSided": true}"#;
     let path = write_gltf(&dir, material, r#""KHR_materials_sheen""#, r#""rotation": [0, 0, 0, 1]"#);
     let s = Scene::load(&path).unwrap();
-    let Material::Conductor { alpha, ior: None, specular_reflectance, two_sided: true } = s.meshes[0].material else {
+    let Material::Conductor { alpha, ior: None, specular_reflectance, two_sided: true, .. } = s.meshes[0].material
+    else {
         panic!()
     };
     assert!((alpha - 0.09).abs() < 1e-6 && specular_reflectance == Vec3::new(0.9, 0.6, 0.2));

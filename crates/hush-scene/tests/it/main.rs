@@ -12,7 +12,7 @@ mod transforms;
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
-use hush_scene::{Material, Reflectance, Scene};
+use hush_scene::{Material, Microfacet, Reflectance, Scene};
 
 fn shared() -> PathBuf {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared");
@@ -154,15 +154,23 @@ fn degenerate_triangles_are_dropped() {
     );
 }
 
+/// Mitsuba's rough BSDFs default to Beckmann; `distribution` picks GGX; `phong` is read as
+/// Beckmann with a warning naming the line.
 #[test]
-fn rough_bsdf_without_distribution_warns_about_beckmann() {
+fn rough_bsdfs_read_their_microfacet_distribution() {
     let with = |extra: &str| {
         let xml = format!(
-            "<scene version=\"3.0.0\">{SENSOR}\n<bsdf type=\"roughconductor\" id=\"m\">{extra}<float name=\"alpha\" value=\"0.2\"/></bsdf></scene>"
+            "<scene version=\"3.0.0\">{SENSOR}\n<shape type=\"sphere\"><bsdf type=\"roughconductor\">{extra}<float name=\"alpha\" value=\"0.2\"/></bsdf></shape></scene>"
         );
-        Scene::from_mitsuba_str(&xml, Path::new("x.xml")).unwrap().warnings
+        let s = Scene::from_mitsuba_str(&xml, Path::new("x.xml")).unwrap();
+        let Material::Conductor { distribution, .. } = s.meshes[0].material else {
+            panic!("{:?}", s.meshes[0].material)
+        };
+        (distribution, s.warnings)
     };
-    let warnings = with("");
-    assert!(warnings.iter().any(|w| w.contains("beckmann") && w.contains("x.xml:")), "{warnings:?}");
-    assert!(with("<string name=\"distribution\" value=\"ggx\"/>").is_empty());
+    assert_eq!(with(""), (Microfacet::Beckmann, vec![]));
+    assert_eq!(with("<string name=\"distribution\" value=\"ggx\"/>"), (Microfacet::Ggx, vec![]));
+    let (d, warnings) = with("<string name=\"distribution\" value=\"phong\"/>");
+    assert_eq!(d, Microfacet::Beckmann);
+    assert!(warnings.iter().any(|w| w.contains("phong") && w.contains("x.xml:")), "{warnings:?}");
 }

@@ -1,0 +1,180 @@
+// Images and the environment (Mitsuba's `bitmap` texture, `constant` and `envmap` emitters),
+// shared by the path tracer and the probe kernel.
+
+// ---- textures ----
+
+fn aux_u32(i: u32) -> u32 {
+    return bitcast<u32>(aux[i]);
+}
+
+fn image_texel(base: u32, width: u32, x: u32, y: u32) -> vec3<f32> {
+    let i = base + 2u + 3u * (y * width + x);
+    return vec3<f32>(aux[i], aux[i + 1u], aux[i + 2u]);
+}
+
+fn wrap(i: i32, n: u32) -> u32 {
+    let m = i32(n);
+    return u32(((i % m) + m) % m);
+}
+
+// Mitsuba's `bitmap` lookup: bilinear between texel centres, repeating outside [0, 1]²;
+// (0, 0) is the top-left corner of the image.
+fn texture_lookup(base: u32, uv: vec2<f32>) -> vec3<f32> {
+    let w = aux_u32(base);
+    let h = aux_u32(base + 1u);
+    let pos = uv * vec2<f32>(f32(w), f32(h)) - 0.5;
+    let f = floor(pos);
+    let t = pos - f;
+    let x0 = wrap(i32(f.x), w);
+    let y0 = wrap(i32(f.y), h);
+    let x1 = select(x0 + 1u, 0u, x0 + 1u == w);
+    let y1 = select(y0 + 1u, 0u, y0 + 1u == h);
+    let top = mix(image_texel(base, w, x0, y0), image_texel(base, w, x1, y0), t.x);
+    let bottom = mix(image_texel(base, w, x0, y1), image_texel(base, w, x1, y1), t.x);
+    return mix(top, bottom, t.y);
+}
+
+// The scene's environment (upload.rs, `GpuEnv`).
+struct Env {
+    // ENV_*; the offsets in `aux` of the map's image and of its sampling tables.
+    kind: u32,
+    image: u32,
+    dist: u32,
+    _pad: u32,
+    // rgb: constant radiance or the map's scale; w: probability that next-event estimation
+    // samples the environment rather than a triangle light.
+    radiance: vec4<f32>,
+    // Columns of the linear map from the environment's frame to the world, and of its inverse.
+    to_world_x: vec4<f32>,
+    to_world_y: vec4<f32>,
+    to_world_z: vec4<f32>,
+    to_local_x: vec4<f32>,
+    to_local_y: vec4<f32>,
+    to_local_z: vec4<f32>,
+}
+
+@group(0) @binding(8) var<uniform> env: Env;
+
+// ---- environment (Mitsuba's `constant` and `envmap` emitters) ----
+
+const ENV_NONE: u32 = 0u;
+const ENV_CONSTANT: u32 = 1u;
+const ENV_MAP: u32 = 2u;
+
+fn env_to_local(d: vec3<f32>) -> vec3<f32> {
+    return normalize(env.to_local_x.xyz * d.x + env.to_local_y.xyz * d.y + env.to_local_z.xyz * d.z);
+}
+
+fn env_to_world(d: vec3<f32>) -> vec3<f32> {
+    return normalize(env.to_world_x.xyz * d.x + env.to_world_y.xyz * d.y + env.to_world_z.xyz * d.z);
+}
+
+// The map's interpolation cell of a local direction and the position inside it. Mitsuba's
+// envmap: u = atan2(x, -z) / 2π shifted by half a texel, v = acos(y) / π; texel columns sit at
+// u = (i + 1/2) / width (the first repeated after the last), rows at v = j / (height − 1).
+struct EnvCell {
+    cell: vec2<u32>,
+    t: vec2<f32>,
+    sin_theta: f32,
+}
+
+fn env_cell(local: vec3<f32>) -> EnvCell {
+    let w = aux_u32(env.image);
+    let h = aux_u32(env.image + 1u);
+    var u = atan2(local.x, -local.z) * (0.5 * INV_PI) - 0.5 / f32(w);
+    u -= floor(u);
+    let v = acos(clamp(local.y, -1.0, 1.0)) * INV_PI;
+    let pos = vec2<f32>(u * f32(w), v * f32(h - 1u));
+    let cell = min(vec2<u32>(pos), vec2<u32>(w - 1u, h - 2u));
+    let sin_theta = sqrt(max(local.x * local.x + local.z * local.z, 1e-14));
+    return EnvCell(cell, pos - vec2<f32>(cell), sin_theta);
+}
+
+fn env_map_eval(c: EnvCell) -> vec3<f32> {
+    let base = env.image;
+    let w = aux_u32(base);
+    let x1 = select(c.cell.x + 1u, 0u, c.cell.x + 1u == w);
+    let top = mix(image_texel(base, w, c.cell.x, c.cell.y), image_texel(base, w, x1, c.cell.y), c.t.x);
+    let bottom = mix(image_texel(base, w, c.cell.x, c.cell.y + 1u), image_texel(base, w, x1, c.cell.y + 1u), c.t.x);
+    return mix(top, bottom, c.t.y) * env.radiance.xyz;
+}
+
+// Radiance arriving along -d (d points away from the scene, world space).
+fn env_eval(d: vec3<f32>) -> vec3<f32> {
+    if env.kind == ENV_CONSTANT {
+        return env.radiance.xyz;
+    }
+    return env_map_eval(env_cell(env_to_local(d)));
+}
+
+// Index of the first entry of the `n` increasing CDF values at aux[base..] that exceeds u.
+fn cdf_search(base: u32, n: u32, u: f32) -> u32 {
+    var lo = 0u;
+    var hi = n - 1u;
+    while lo < hi {
+        let mid = (lo + hi) / 2u;
+        if aux[base + mid] <= u {
+            lo = mid + 1u;
+        } else {
+            hi = mid;
+        }
+    }
+    return lo;
+}
+
+fn cdf_prob(base: u32, i: u32) -> f32 {
+    return aux[base + i] - select(0.0, aux[base + i - 1u], i > 0u);
+}
+
+// Solid-angle density of env_sample (before the light-picking probability).
+fn env_pdf(d: vec3<f32>) -> f32 {
+    if env.kind == ENV_CONSTANT {
+        return 0.25 * INV_PI;
+    }
+    let c = env_cell(env_to_local(d));
+    let w = aux_u32(env.image);
+    let ny = aux_u32(env.image + 1u) - 1u;
+    let marginal = env.dist;
+    let conditional = marginal + ny + c.cell.y * w;
+    let p = cdf_prob(marginal, c.cell.y) * cdf_prob(conditional, c.cell.x) * f32(w * ny);
+    return p / (2.0 * PI * PI * c.sin_theta);
+}
+
+struct EnvSample {
+    d: vec3<f32>,
+    pdf: f32,
+    radiance: vec3<f32>,
+}
+
+// A direction toward the environment: uniform over the sphere for a constant one; for a map,
+// a cell picked from the piecewise-constant distribution over its interpolation cells
+// (luminance × sin θ) and a uniform point inside it.
+fn env_sample(u: vec2<f32>) -> EnvSample {
+    if env.kind == ENV_CONSTANT {
+        let z = 1.0 - 2.0 * u.x;
+        let r = sqrt(max(0.0, 1.0 - z * z));
+        let phi = 2.0 * PI * u.y;
+        return EnvSample(vec3<f32>(r * cos(phi), r * sin(phi), z), 0.25 * INV_PI, env.radiance.xyz);
+    }
+    let w = aux_u32(env.image);
+    let ny = aux_u32(env.image + 1u) - 1u;
+    let marginal = env.dist;
+    let row = cdf_search(marginal, ny, u.x);
+    let p_row = cdf_prob(marginal, row);
+    let fy = clamp((u.x - select(0.0, aux[marginal + row - 1u], row > 0u)) / p_row, 0.0, 1.0);
+    let conditional = marginal + ny + row * w;
+    let col = cdf_search(conditional, w, u.y);
+    let p_col = cdf_prob(conditional, col);
+    let fx = clamp((u.y - select(0.0, aux[conditional + col - 1u], col > 0u)) / p_col, 0.0, 1.0);
+    let uu = (f32(col) + fx) / f32(w) + 0.5 / f32(w);
+    let v = (f32(row) + fy) / f32(ny);
+    let theta = PI * v;
+    let phi = 2.0 * PI * uu;
+    let st = sin(theta);
+    let local = vec3<f32>(sin(phi) * st, cos(theta), -cos(phi) * st);
+    let sin_theta = max(st, 1e-7);
+    let pdf = p_row * p_col * f32(w * ny) / (2.0 * PI * PI * sin_theta);
+    let c = EnvCell(vec2<u32>(col, row), vec2<f32>(fx, fy), sin_theta);
+    return EnvSample(env_to_world(local), pdf, env_map_eval(c));
+}
+

@@ -1,0 +1,198 @@
+//! `hush bench`: the measurements behind `cargo xtask bench net`, one per process so that each
+//! reports its own peak memory. Each prints one JSON object on stdout.
+//!
+//! - `inference`: the whole inference path of [`hush_net::denoise`] (autoexposure, input transfer,
+//!   the network on the zero-padded image, output transfer) on a synthetic image, warm median of N.
+//! - `train-step`: one training step as `hush train` takes it (forward, loss, backward, optimizer
+//!   step) on a synthetic batch, warm median of N, and its achieved GFLOP/s.
+//! - `gemm`: Candle's f32 matrix product on square matrices, the machine's reference rate.
+//!
+//! Weights are randomly initialized: dense convolutions cost the same whatever the values.
+
+use anyhow::{Result, bail};
+use candle_core::{DType, Device, Tensor};
+use candle_nn::{VarBuilder, VarMap};
+use clap::{Args, Subcommand};
+use hush_net::{Features, Loss, ModelInfo, UNet, UNetConfig, UNetKind, init_weights, transfer::Transfer};
+use hush_train::{Optimizer, OptimizerConfig};
+
+use crate::cpu::{cpu_seconds, peak_rss_bytes};
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    #[command(subcommand)]
+    pub what: BenchWhat,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum BenchWhat {
+    /// Denoise one synthetic size × size image with a randomly initialized network.
+    Inference(NetArgs),
+    /// Training steps on a synthetic batch.
+    TrainStep(NetArgs),
+    /// Candle's f32 matrix product (size × size times size × size).
+    Gemm {
+        #[arg(long, default_value_t = 1024)]
+        size: usize,
+        #[arg(long, default_value_t = 5)]
+        runs: usize,
+    },
+}
+
+#[derive(Args, Debug)]
+pub struct NetArgs {
+    /// unet, unet_small, unet_large or autoencoder.
+    #[arg(long, default_value = "unet")]
+    pub kind: String,
+    #[arg(long, default_value_t = 1.0)]
+    pub width: f64,
+    /// Auxiliary features besides the color, e.g. `alb,nrm` (9 channels) or `diff,spec,nrm` (12).
+    #[arg(long, default_value = "alb,nrm")]
+    pub features: String,
+    /// Image side in pixels (a crop side for train-step).
+    #[arg(long, default_value_t = 512)]
+    pub size: usize,
+    /// Images per training batch (train-step only).
+    #[arg(long, default_value_t = 4)]
+    pub batch: usize,
+    /// Timed runs after one warm-up run.
+    #[arg(long, default_value_t = 3)]
+    pub runs: usize,
+}
+
+impl NetArgs {
+    fn info(&self) -> Result<ModelInfo> {
+        let Some(kind) = UNetKind::parse(&self.kind) else {
+            bail!("unknown --kind {:?}; known: unet, unet_small, unet_large, autoencoder", self.kind)
+        };
+        let features = Features::parse(&self.features)?;
+        let net = UNetConfig { kind, in_channels: features.in_channels(), out_channels: 3, width: self.width };
+        let info = ModelInfo { net, features, transfer: Transfer::Pu };
+        info.validate()?;
+        if self.size == 0 || self.runs == 0 || self.batch == 0 {
+            bail!("--size, --runs and --batch must be at least 1")
+        }
+        Ok(info)
+    }
+}
+
+/// A deterministic, noisy-looking, positive image of `channels` interleaved channels.
+fn synthetic(size: usize, channels: usize, salt: u32) -> Vec<f32> {
+    (0..size * size * channels)
+        .map(|i| {
+            let h = (i as u32 ^ salt).wrapping_mul(0x9E37_79B9).rotate_left(13).wrapping_mul(0x85EB_CA6B);
+            (h >> 8) as f32 / (1u32 << 24) as f32
+        })
+        .collect()
+}
+
+fn median(mut xs: Vec<f64>) -> f64 {
+    xs.sort_by(f64::total_cmp);
+    xs[xs.len() / 2]
+}
+
+/// Runs `f` once to warm up, then `runs` times; returns the median wall and CPU seconds.
+fn time(runs: usize, mut f: impl FnMut() -> Result<()>) -> Result<(f64, f64, Vec<f64>)> {
+    f()?;
+    let (mut wall, mut cpu) = (Vec::new(), Vec::new());
+    for _ in 0..runs {
+        let (t, c) = (std::time::Instant::now(), cpu_seconds());
+        f()?;
+        wall.push(t.elapsed().as_secs_f64());
+        cpu.push(cpu_seconds() - c);
+    }
+    Ok((median(wall.clone()), median(cpu), wall))
+}
+
+fn threads() -> serde_json::Value {
+    serde_json::json!({
+        "rayon_num_threads": std::env::var("RAYON_NUM_THREADS").ok(),
+        "available_parallelism": std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
+    })
+}
+
+pub fn run(args: BenchArgs) -> Result<()> {
+    let device = crate::denoiser::device()?;
+    let json = match args.what {
+        BenchWhat::Inference(a) => inference(&a, &device)?,
+        BenchWhat::TrainStep(a) => train_step(&a, &device)?,
+        BenchWhat::Gemm { size, runs } => gemm(size, runs.max(1), &device)?,
+    };
+    println!("{}", serde_json::to_string_pretty(&json)?);
+    Ok(())
+}
+
+fn new_net(info: &ModelInfo, device: &Device) -> Result<(VarMap, UNet)> {
+    let varmap = VarMap::new();
+    let net = UNet::new(VarBuilder::from_varmap(&varmap, DType::F32, device), &info.net)?;
+    init_weights(&varmap, 1)?;
+    Ok((varmap, net))
+}
+
+fn inference(a: &NetArgs, device: &Device) -> Result<serde_json::Value> {
+    let info = a.info()?;
+    let (_varmap, net) = new_net(&info, device)?;
+    let color = synthetic(a.size, 3, 1);
+    let aux: Vec<Vec<f32>> = (0..info.features.aux.len()).map(|i| synthetic(a.size, 3, 2 + i as u32)).collect();
+    let aux_refs: Vec<&[f32]> = aux.iter().map(Vec::as_slice).collect();
+    let (seconds, cpu, all) = time(a.runs, || {
+        hush_net::denoise(&net, &info, a.size, a.size, &color, &aux_refs)?;
+        Ok(())
+    })?;
+    let padded = a.size.div_ceil(hush_net::ALIGNMENT) * hush_net::ALIGNMENT;
+    let flop = 2.0 * info.net.multiply_adds(padded, padded) as f64;
+    Ok(serde_json::json!({
+        "what": "inference",
+        "kind": info.net.kind.name(), "width": info.net.width, "in_channels": info.net.in_channels,
+        "size": a.size, "device": format!("{device:?}"),
+        "seconds": seconds, "cpu_seconds": cpu, "runs_seconds": all,
+        "gflop": flop / 1e9, "gflops": flop / 1e9 / seconds,
+        "peak_rss_bytes": peak_rss_bytes(), "threads": threads(),
+    }))
+}
+
+fn train_step(a: &NetArgs, device: &Device) -> Result<serde_json::Value> {
+    let info = a.info()?;
+    let (varmap, net) = new_net(&info, device)?;
+    let mut opt = Optimizer::for_varmap(OptimizerConfig::adam(), &varmap)?;
+    let c = info.net.in_channels;
+    let shape = (a.batch, c, a.size, a.size);
+    let x = Tensor::from_vec(synthetic(a.size, a.batch * c, 7), shape, device)?;
+    let y = Tensor::from_vec(synthetic(a.size, a.batch * 3, 8), (a.batch, 3, a.size, a.size), device)?;
+    let loss = Loss::Mix;
+    let (seconds, cpu, all) = time(a.runs, || {
+        let out = candle_core::Module::forward(&net, &x)?;
+        let l = loss.compute(&out, &y)?;
+        let grads = l.backward()?;
+        opt.step(&grads, 1e-4, 1.0)?;
+        Ok(())
+    })?;
+    let padded = a.size.div_ceil(hush_net::ALIGNMENT) * hush_net::ALIGNMENT;
+    // Forward, input gradient and weight gradient each cost one forward pass of multiply-adds.
+    let flop = 3.0 * 2.0 * a.batch as f64 * info.net.multiply_adds(padded, padded) as f64;
+    Ok(serde_json::json!({
+        "what": "train-step",
+        "kind": info.net.kind.name(), "width": info.net.width, "in_channels": c,
+        "batch": a.batch, "size": a.size, "loss": loss.name(), "optimizer": "adam", "device": format!("{device:?}"),
+        "seconds": seconds, "cpu_seconds": cpu, "runs_seconds": all,
+        "flop_model": "3 forward passes of 3x3-convolution multiply-adds (forward, input gradient, weight gradient), \
+                       2 FLOP each; loss, pooling and optimizer not counted",
+        "gflop": flop / 1e9, "gflops": flop / 1e9 / seconds,
+        "peak_rss_bytes": peak_rss_bytes(), "threads": threads(),
+    }))
+}
+
+fn gemm(n: usize, runs: usize, device: &Device) -> Result<serde_json::Value> {
+    let a = Tensor::from_vec(synthetic(n, 1, 3), (n, n), device)?;
+    let b = Tensor::from_vec(synthetic(n, 1, 4), (n, n), device)?;
+    let (seconds, cpu, all) = time(runs, || {
+        a.matmul(&b)?.sum_all()?.to_scalar::<f32>()?;
+        Ok(())
+    })?;
+    let flop = 2.0 * (n as f64).powi(3);
+    Ok(serde_json::json!({
+        "what": "gemm", "size": n, "device": format!("{device:?}"),
+        "seconds": seconds, "cpu_seconds": cpu, "runs_seconds": all, "gflops": flop / 1e9 / seconds,
+        "peak_rss_bytes": peak_rss_bytes(), "threads": threads(),
+    }))
+}

@@ -1,0 +1,94 @@
+//! The Python baselines of `hush eval`: `cargo xtask baselines setup` installs official OIDN 2.5.1 (PyPI
+//! `pyoidn`), BM3D, flip-evaluator and scikit-image (the versions pinned in
+//! `crates/hush-eval/baselines/requirements.txt`) into a venv under `target/baselines-venv`, and
+//! `cargo xtask baselines check` runs BM3D and OIDN through hush-eval on a 64² crop of the Cornell box and
+//! checks that they lower its error (the test `external::run_for_real_when_installed`, required to run),
+//! then that hush-eval's `oidn` feature, built against pyoidn's bundled library, reproduces OIDN's outputs.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use crate::util::{Result, project_root, spawn, target_dir};
+
+/// The one command that installs the baselines (also printed by hush-eval when one is missing).
+pub const SETUP: &str = "cargo xtask baselines setup";
+
+pub fn run(args: &[String]) -> Result<()> {
+    match args.first().map(String::as_str) {
+        Some("setup") => setup(),
+        Some("check") => check(),
+        _ => Err("usage: cargo xtask baselines setup | check".into()),
+    }
+}
+
+fn venv_dir() -> PathBuf {
+    target_dir().join("baselines-venv")
+}
+
+/// The venv's Python, whether or not it is installed yet.
+pub fn venv_python() -> PathBuf {
+    venv_dir().join("bin").join("python")
+}
+
+fn requirements() -> PathBuf {
+    project_root().join("crates/hush-eval/baselines/requirements.txt")
+}
+
+/// Creates the venv (if needed), installs the pinned packages and checks that they import.
+fn setup() -> Result<()> {
+    let dir = venv_dir();
+    if !venv_python().is_file() {
+        let python = std::env::var("PYTHON").unwrap_or_else(|_| "python3".into());
+        spawn(Command::new(&python).args(["-m", "venv"]).arg(&dir)).map_err(|e| {
+            format!("{e}\n(a Python 3.9+ with venv is needed: on Debian `apt-get install -y python3-venv`)")
+        })?;
+    }
+    spawn(Command::new(venv_python()).args(["-m", "pip", "install", "--quiet", "--upgrade", "pip"]))?;
+    spawn(Command::new(venv_python()).args(["-m", "pip", "install", "--quiet", "-r"]).arg(requirements()))?;
+    spawn(Command::new(venv_python()).args([
+        "-c",
+        "import importlib.metadata as m, bm3d, pyoidn, flip_evaluator, skimage, numpy; \
+         print('baselines:', *(p + ' ' + m.version(p) for p in \
+         ['pyoidn', 'bm3d', 'flip-evaluator', 'scikit-image', 'numpy']))",
+    ]))?;
+    println!("Python baselines installed in {} (pinned in {})", dir.display(), requirements().display());
+    Ok(())
+}
+
+/// Runs BM3D and OIDN for real through hush-eval and fails if either is skipped or does not help; then
+/// builds hush-eval's `oidn` feature against pyoidn's bundled library and checks that in-process OIDN
+/// reproduces OIDN 2.5.1's shared outputs.
+fn check() -> Result<()> {
+    if !venv_python().is_file() {
+        return Err(format!("the baselines are not installed ({} is missing): run `{SETUP}`", venv_python().display()));
+    }
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let test = |features: &[&str], filter: &str| {
+        let mut cmd = Command::new(&cargo);
+        cmd.current_dir(project_root()).args(["test", "-p", "hush-eval"]).args(features);
+        cmd.args(["--test", "it", filter, "--", "--nocapture"]);
+        cmd
+    };
+    spawn(
+        test(&[], "external::run_for_real_when_installed")
+            .env("HUSH_REQUIRE_BASELINES", "1")
+            .env("HUSH_BASELINES_PYTHON", venv_python()),
+    )?;
+    let oidn_dir = oidn_dir()?;
+    spawn(
+        test(&["--features", "oidn"], "external::oidn_native")
+            .env("LD_LIBRARY_PATH", oidn_dir.join("lib"))
+            .env("OIDN_DIR", &oidn_dir),
+    )
+}
+
+/// `<venv>/lib/python3.*/site-packages/pyoidn/oidn`: OIDN's library as bundled by pyoidn.
+fn oidn_dir() -> Result<PathBuf> {
+    let lib = venv_dir().join("lib");
+    let entries = std::fs::read_dir(&lib).map_err(|e| format!("{}: {e}", lib.display()))?;
+    entries
+        .filter_map(|e| e.ok())
+        .map(|e| e.path().join("site-packages/pyoidn/oidn"))
+        .find(|p| p.join("lib").is_dir())
+        .ok_or_else(|| format!("pyoidn's bundled OIDN not found under {}: run `{SETUP}`", lib.display()))
+}

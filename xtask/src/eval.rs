@@ -1,0 +1,92 @@
+//! `cargo xtask eval`: `hush eval` on the demo's dataset and model (`target/demo/`, made by `cargo xtask
+//! demo`; rendered and trained here first if missing) with the noisy input, the trained model and every
+//! baseline hush knows (`--baseline all`), into `target/eval/`. `--dataset DIR --model FILE` evaluate another
+//! dataset and model instead, `--out DIR` writes elsewhere.
+//!
+//! `--check-html` then renders `report.html` in headless Chromium (installed with apt-get when missing and
+//! run as root) through hush-eval's `html_renders_in_chromium` test: no console or network errors, the report
+//! in the DOM, a screenshot that is not blank.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use crate::demo::{self, DemoPaths};
+use crate::util::{Result, build_hush, cargo, ensure_vulkan, is_root, project_root, release, spawn, target_dir};
+
+const USAGE: &str =
+    "usage: cargo xtask eval [--release] [--check-html] [--timing-runs N] [--dataset DIR --model FILE] [--out DIR]";
+const CHROMIUM_INSTALL: &str = "apt-get install -y chromium";
+
+pub fn run(args: &[String]) -> Result<()> {
+    let mut timing_runs = "3".to_string();
+    let (mut dataset, mut model, mut out) = (None, None, target_dir().join("eval"));
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        let mut value = || it.next().cloned().ok_or_else(|| format!("{a} needs a value\n{USAGE}"));
+        match a.as_str() {
+            "--release" | "--check-html" => {}
+            "--timing-runs" => timing_runs = value()?,
+            "--dataset" => dataset = Some(PathBuf::from(value()?)),
+            "--model" => model = Some(PathBuf::from(value()?)),
+            "--out" => out = PathBuf::from(value()?),
+            _ => return Err(format!("unknown argument '{a}'\n{USAGE}")),
+        }
+    }
+    ensure_vulkan()?;
+    let hush = build_hush(release(args))?;
+    let (dataset, model) = match (dataset, model) {
+        (Some(dataset), Some(model)) => (dataset, model),
+        (None, None) => {
+            let paths = DemoPaths::new();
+            if !paths.dataset.join("manifest.json").is_file() {
+                eprintln!("xtask: no demo dataset in {}; rendering it", paths.dataset.display());
+                demo::render_dataset(&hush, &paths)?;
+            }
+            if !paths.model().is_file() {
+                eprintln!("xtask: no demo model at {}; training it", paths.model().display());
+                demo::train(&hush, &paths)?;
+            }
+            (paths.dataset.clone(), paths.model())
+        }
+        _ => return Err(format!("--dataset and --model go together\n{USAGE}")),
+    };
+    spawn(
+        Command::new(&hush)
+            .arg("eval")
+            .arg("--dataset")
+            .arg(&dataset)
+            .arg("--model")
+            .arg(&model)
+            .args(["--baseline", "all", "--timing-runs", &timing_runs])
+            .arg("--out")
+            .arg(&out),
+    )?;
+    let html = out.join("report.html");
+    if args.iter().any(|a| a == "--check-html") {
+        check_html(&html)?;
+    }
+    println!("report: {}", html.display());
+    println!("        {}", out.join("report.md").display());
+    Ok(())
+}
+
+/// Runs hush-eval's Chromium test on `html`, installing Chromium first where it is missing and we may.
+fn check_html(html: &std::path::Path) -> Result<()> {
+    let has_chromium = Command::new("chromium").arg("--version").output().is_ok_and(|o| o.status.success());
+    if !has_chromium {
+        if is_root() && std::path::Path::new("/usr/bin/apt-get").exists() {
+            eprintln!("xtask: Chromium is missing; installing it: {CHROMIUM_INSTALL}");
+            spawn(Command::new("apt-get").args(["update", "-qq"]))?;
+            spawn(Command::new("apt-get").args(["install", "-y", "-qq", "chromium"]))?;
+        } else {
+            return Err(format!("--check-html needs Chromium: install it, e.g. `sudo {CHROMIUM_INSTALL}`"));
+        }
+    }
+    spawn(
+        Command::new(cargo())
+            .current_dir(project_root())
+            .env("HUSH_CHROMIUM", "1")
+            .env("HUSH_CHROMIUM_HTML", html)
+            .args(["test", "-p", "hush-eval", "--test", "it", "html_renders_in_chromium", "--", "--nocapture"]),
+    )
+}
