@@ -1,6 +1,9 @@
 //! End-to-end tests of the `hush` command line: bad input gets a clear error and no panic, and
 //! the whole pipeline (dataset → train → denoise → eval) runs on a tiny Cornell box.
 
+mod procedural;
+mod shared_scenes;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -393,6 +396,37 @@ fn recorded_files(manifest: &Path, root: &Path) -> Vec<(String, u64, std::time::
         .collect()
 }
 
+/// Runs `hush args` and kills it (SIGKILL) once the manifest in `ds` records `count` images; returns the
+/// files recorded then.
+#[cfg(unix)]
+fn kill_once_recorded(args: &[&str], ds: &Path, count: usize) -> Vec<(String, u64, std::time::SystemTime)> {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_hush"))
+        .args(args)
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("hush starts");
+    let manifest = ds.join("manifest.json");
+    while recorded_files(&manifest, ds).len() < count {
+        if let Some(status) = child.try_wait().unwrap() {
+            panic!("hush dataset finished ({status}) before it could be killed; give it more work");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    recorded_files(&manifest, ds)
+}
+
+/// Runs `hush args` to completion and checks that it kept every file of `before` (same inode and mtime).
+#[cfg(unix)]
+fn rerun_keeps(args: &[&str], ds: &Path, before: &[(String, u64, std::time::SystemTime)]) {
+    expect_success(args);
+    let after = recorded_files(&ds.join("manifest.json"), ds);
+    for file in before {
+        assert!(after.contains(file), "{} was rendered again after the kill", file.0);
+    }
+}
+
 /// Kill `hush dataset` (SIGKILL) once its first images are recorded; the re-run keeps every recorded image
 /// (same inode and mtime: not re-rendered), leaves no temporary file, and the result passes `check`. Also
 /// renders the same job in two shards and checks the merged manifest.
@@ -418,32 +452,11 @@ fn killed_dataset_resumes_without_rerendering() {
         "--size",
         "48",
     ];
-    let mut child = Command::new(env!("CARGO_BIN_EXE_hush"))
-        .args(args)
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .expect("hush starts");
-    let manifest = ds.join("manifest.json");
-    let mut before = Vec::new();
-    while before.len() < 2 {
-        if let Some(status) = child.try_wait().unwrap() {
-            panic!("hush dataset finished ({status}) before it could be killed; give it more work");
-        }
-        std::thread::sleep(std::time::Duration::from_millis(20));
-        before = recorded_files(&manifest, &ds);
-    }
-    child.kill().unwrap();
-    child.wait().unwrap();
-    let before = recorded_files(&manifest, &ds);
-    assert!(!before.is_empty());
+    let before = kill_once_recorded(&args, &ds, 2);
     let m = manifest_of(&ds);
     assert!(m["views"].as_array().unwrap().len() < 3, "killed before the end: {m}");
 
-    expect_success(&args);
-    let after = recorded_files(&manifest, &ds);
-    for file in &before {
-        assert!(after.contains(file), "{} was rendered again after the kill", file.0);
-    }
+    rerun_keeps(&args, &ds, &before);
     let leftovers: Vec<_> = std::fs::read_dir(&ds)
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())

@@ -7,6 +7,7 @@ mod bench_net;
 mod demo;
 mod eval;
 mod mitsuba;
+mod procedural;
 mod sweep;
 mod test;
 mod util;
@@ -15,7 +16,8 @@ use std::process::ExitCode;
 
 const USAGE: &str = "usage: cargo xtask <task>
 tasks:
-  test [cargo test args]     install a Vulkan driver if none is present, then run every test
+  test [cargo test args]     install a Vulkan driver if none is present, then run every test and
+                             (without args) every sweep at its tiny scale
   demo [--release] [--resume] render → dataset → train → eval → report on the bundled Cornell box
   eval [--release] [--check-html] [--timing-runs N] [--dataset DIR --model FILE] [--out DIR]
                              hush eval on the demo's dataset and model with every baseline: report,
@@ -32,6 +34,9 @@ tasks:
                              steps per second and the loader's share of `hush train` (the demo's settings)
   baselines setup            install OIDN 2.5.1, BM3D, flip-evaluator, scikit-image (PyPI) into target/baselines-venv
   baselines check            run BM3D and OIDN through hush-eval on a Cornell box crop; fail unless both help
+  procedural check [--count N] [--seed S] [--features default|all]
+                             N procedural scenes (default 100) generate and render at 32² without
+                             NaN/Inf; spread of mean luminance, material and light mix
   mitsuba setup              install Mitsuba 3 (PyPI) into target/mitsuba-venv and verify it renders
   mitsuba references         re-render the references of data/tests/mitsuba with Mitsuba 3
 ";
@@ -44,6 +49,7 @@ fn main() -> ExitCode {
         Some("eval") => eval::run(&args[1..]),
         Some("test") => test::run(&args[1..]),
         Some("mitsuba") => mitsuba::run(&args[1..]),
+        Some("procedural") => procedural::run(&args[1..]),
         Some("baselines") => baselines::run(&args[1..]),
         Some("sweep") => sweep::run(&args[1..]),
         _ => Err(format!("{USAGE}{}", sweep::USAGE)),

@@ -46,8 +46,9 @@ pub use firefly::{DEFAULT_FIREFLY_FACTOR, DespeckleStats, despeckle, luminance};
 pub use image::Image;
 pub use layout::{AuxKind, Layout, ViewImages, load_view};
 pub use manifest::{
-    AuxRecord, CameraRecord, DatasetConfig, FireflyRecord, Manifest, PendingView, ProbeRecord, ReferenceCheck,
-    ReferenceRecord, RenderRecord, SceneEntry, SkippedScene, Split, ViewGeneration, ViewRecord, manifest_files,
+    AuxRecord, CameraRecord, DatasetConfig, FireflyRecord, Manifest, PendingView, ProbeRecord, ProceduralRecord,
+    ProceduralScene, ReferenceCheck, ReferenceRecord, RenderRecord, SceneEntry, SkippedScene, Split, ViewGeneration,
+    ViewRecord, manifest_files,
 };
 pub use png::{srgb_encode, write_png_preview};
 pub use validate::{NegativePolicy, check_finite, check_radiance};

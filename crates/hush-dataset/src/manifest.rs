@@ -247,6 +247,36 @@ pub struct DatasetConfig {
     pub scenes: Vec<SceneEntry>,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub skipped: Vec<SkippedScene>,
+    /// The procedural scenes the run generated (`--procedural N`), if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub procedural: Option<ProceduralRecord>,
+}
+
+/// Procedural scenes generated for a dataset: enough to generate the same scenes again.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ProceduralRecord {
+    pub count: u32,
+    pub seed: u64,
+    /// hush-scene's generator version: the same seed gives the same scene only under the same version.
+    pub generator_version: u32,
+    /// The generator's features (`default`, `all` or a list).
+    pub features: String,
+    pub scenes: Vec<ProceduralScene>,
+}
+
+/// One generated scene.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ProceduralScene {
+    pub index: u64,
+    /// The scene file, relative to the dataset root.
+    pub path: String,
+    /// The generator's seed for the attempt kept (derived from the run's seed, the index and the attempt).
+    pub scene_seed: u64,
+    /// Attempts before it were rejected by the probe (their camera saw too little light).
+    pub attempt: u32,
+    pub style: String,
+    /// Fraction of the probe render's pixels that received light.
+    pub probe_lit_fraction: Option<f64>,
 }
 
 /// A manifest: every finished view, views in progress and the settings that produced them.

@@ -30,6 +30,7 @@ mod mitsuba;
 mod model;
 mod named;
 mod obj;
+pub mod procedural;
 mod shapes;
 mod texture;
 

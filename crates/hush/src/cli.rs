@@ -4,6 +4,7 @@ use clap::{Args, Parser, Subcommand};
 
 pub use crate::bench_cmd::BenchArgs;
 pub use crate::dataset_cmd::DatasetArgs;
+pub use crate::scene_cmd::SceneArgs;
 pub use crate::train_cmd::TrainArgs;
 
 #[derive(Parser, Debug)]
@@ -24,6 +25,8 @@ pub enum Command {
     /// Render a dataset: several views of scenes, noisy images along an spp ladder, clean
     /// auxiliary features and references.
     Dataset(DatasetArgs),
+    /// Generate procedural scenes.
+    Scene(SceneArgs),
     /// Train a denoising U-Net on a dataset's training split.
     Train(TrainArgs),
     /// Denoise one image with a trained model.

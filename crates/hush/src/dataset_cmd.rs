@@ -8,8 +8,9 @@ use clap::{Args, Subcommand};
 use glam::{Quat, Vec3};
 use hush_dataset::{
     AuxKind, AuxRecord, CameraRecord, DatasetConfig, FireflyRecord, Layout, Manifest, PendingView, ProbeRecord,
-    ReferenceCheck, ReferenceRecord, RenderRecord, SceneEntry, SkippedScene, Split, ViewGeneration, check_dataset,
-    check_image, despeckle, link_or_copy, luminance, read_rgb, temp_files, temp_target, write_rgb,
+    ProceduralRecord, ProceduralScene, ReferenceCheck, ReferenceRecord, RenderRecord, SceneEntry, SkippedScene, Split,
+    ViewGeneration, check_dataset, check_image, despeckle, link_or_copy, luminance, read_rgb, temp_files, temp_target,
+    write_rgb,
 };
 use hush_scene::{Camera, Scene};
 use hush_trace::{RenderOutput, RenderSettings, Renderer};
@@ -17,6 +18,7 @@ use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 
 use crate::cli::ViewOverrides;
 use crate::render_cmd::{load_scene, open_gpu};
+use crate::scene_cmd::{GeneratorArgs, generate_into, summary_json};
 
 #[derive(Args, Debug)]
 #[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
@@ -26,8 +28,14 @@ pub struct DatasetArgs {
     /// Scene files (Mitsuba XML, glTF, OBJ) or folders: a folder contributes every `scene.xml` below it
     /// (without looking further inside that scene's folder) and every `.gltf`, `.glb` and `.obj` elsewhere.
     /// Scenes that fail to load are reported as skipped.
-    #[arg(required = true)]
+    #[arg(required_unless_present = "procedural")]
     pub scenes: Vec<PathBuf>,
+    /// Also generate this many procedural scenes (seeded by --seed) into OUT/scenes/proc_<seed>_<i>/ and render
+    /// them like the others. Re-running keeps the scenes already generated with the same settings.
+    #[arg(long, default_value_t = 0)]
+    pub procedural: u32,
+    #[command(flatten)]
+    pub generator: GeneratorArgs,
     /// Output folder (created; re-running resumes and skips finished, valid images).
     #[arg(long, required = true)]
     pub out: Option<PathBuf>,
@@ -96,12 +104,12 @@ fn parse_shard(s: &str) -> Result<(u32, u32), String> {
 }
 
 /// A generated view is kept when at least this fraction of its probe pixels receives light.
-const MIN_LIT_FRACTION: f64 = 0.5;
+pub(crate) const MIN_LIT_FRACTION: f64 = 0.5;
 /// Candidate cameras tried per generated view before the best one is kept anyway.
 const MAX_ATTEMPTS: u32 = 8;
 /// The probe render: this many pixels along the longer side, at this spp.
-const PROBE_SIZE: u32 = 32;
-const PROBE_SPP: u32 = 4;
+pub(crate) const PROBE_SIZE: u32 = 32;
+pub(crate) const PROBE_SPP: u32 = 4;
 
 /// SplitMix64: a tiny, well-mixed generator for seeds and view jitter.
 pub struct SplitMix(pub u64);
@@ -212,12 +220,15 @@ struct JobScene {
     split: Option<Split>,
 }
 
-/// Loads every scene; failures are reported and recorded as skipped unless none loads.
-fn load_scenes(args: &DatasetArgs) -> Result<(Vec<JobScene>, Vec<SkippedScene>)> {
+/// Loads every scene (those named and the generated ones); failures are reported and recorded as skipped
+/// unless none loads.
+fn load_scenes(args: &DatasetArgs, generated: &[PathBuf]) -> Result<(Vec<JobScene>, Vec<SkippedScene>)> {
     let overrides = ViewOverrides { width: args.size, height: args.size, ..Default::default() };
     let mut loaded: Vec<JobScene> = Vec::new();
     let mut skipped = Vec::new();
-    for path in collect_scene_files(&args.scenes)? {
+    let mut files = collect_scene_files(&args.scenes)?;
+    files.extend(generated.iter().cloned());
+    for path in files {
         match load_scene(&path, &overrides) {
             Ok(scene) => {
                 let base = scene_name(&path);
@@ -580,7 +591,11 @@ pub fn run(args: DatasetArgs) -> Result<()> {
     }
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let layout = Layout::new(&out);
-    let (scenes, skipped) = load_scenes(&args)?;
+    let gpu = open_gpu()?;
+    let renderer = Renderer::new(&gpu)?;
+    let procedural = if args.procedural > 0 { Some(generate_procedural(&args, &out, &renderer)?) } else { None };
+    let generated: Vec<PathBuf> = procedural.iter().flat_map(|p| p.scenes.iter().map(|s| out.join(&s.path))).collect();
+    let (scenes, skipped) = load_scenes(&args, &generated)?;
 
     // The jobs, one per (scene, view), dealt round-robin to the shards.
     let (shard, shards) = args.shard.unwrap_or((0, 1));
@@ -618,6 +633,7 @@ pub fn run(args: DatasetArgs) -> Result<()> {
             })
             .collect(),
         skipped,
+        procedural,
     };
     let known = Manifest::load_or_default(&out)?;
     let (mut own, own_path) = match args.shard {
@@ -641,7 +657,6 @@ pub fn run(args: DatasetArgs) -> Result<()> {
         }
     }
 
-    let gpu = open_gpu()?;
     let bars = MultiProgress::new();
     let total = bars.add(ProgressBar::new(jobs.len() as u64 * images_per_view(&args)));
     total.set_style(
@@ -649,7 +664,7 @@ pub fn run(args: DatasetArgs) -> Result<()> {
             .expect("valid template")
             .progress_chars("=> "),
     );
-    let mut ctx = Ctx { args: &args, layout, renderer: Renderer::new(&gpu)?, bars, total, own, own_path, rendered: 0 };
+    let mut ctx = Ctx { args: &args, layout, renderer, bars, total, own, own_path, rendered: 0 };
     let start = std::time::Instant::now();
     let n_views = args.views;
     for (k, &(s, v)) in jobs.iter().enumerate() {
@@ -676,6 +691,72 @@ pub fn run(args: DatasetArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// The procedural scenes of a run: scene `i` lives in `scenes/proc_<seed>_<i>/scene.xml` beside its assets and
+/// a `scene.json` that says how it was generated; a scene whose `scene.json` matches the run's settings is kept,
+/// any other is generated (and probed) again.
+fn generate_procedural(args: &DatasetArgs, out: &Path, renderer: &Renderer) -> Result<ProceduralRecord> {
+    let size = args.size.unwrap_or(256);
+    let options = args.generator.options(size, size);
+    let mut scenes = Vec::new();
+    let (mut kept, start) = (0, std::time::Instant::now());
+    for index in 0..args.procedural as u64 {
+        let rel = format!("scenes/proc_{}_{index}/scene.xml", args.seed);
+        let xml = out.join(&rel);
+        let json = xml.with_file_name("scene.json");
+        let want = serde_json::json!({
+            "generator_version": hush_scene::procedural::GENERATOR_VERSION,
+            "seed": args.seed,
+            "index": index,
+            "features": options.features.describe(),
+            "width": size,
+            "height": size,
+            "borrow_meshes": options.borrow_meshes,
+        });
+        let previous = std::fs::read_to_string(&json)
+            .ok()
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+            .filter(|p| xml.is_file() && want.as_object().is_some_and(|w| w.iter().all(|(k, v)| &p[k] == v)));
+        let summary = match previous {
+            Some(p) => {
+                kept += 1;
+                p
+            }
+            None => {
+                let written = generate_into(&xml, args.seed, index, &options, Some(renderer))?;
+                let mut s = summary_json(&written, args.seed, index, &options);
+                if let (Some(s), Some(w)) = (s.as_object_mut(), want.as_object()) {
+                    s.extend(w.clone());
+                }
+                hush_dataset::write_atomic(&json, |tmp| std::fs::write(tmp, serde_json::to_string_pretty(&s)?))
+                    .with_context(|| format!("writing {}", json.display()))?;
+                s
+            }
+        };
+        scenes.push(ProceduralScene {
+            index,
+            path: rel,
+            scene_seed: summary["scene_seed"].as_u64().context("scene.json without scene_seed")?,
+            attempt: summary["attempt"].as_u64().unwrap_or(0) as u32,
+            style: summary["style"].as_str().unwrap_or_default().to_string(),
+            probe_lit_fraction: summary["probe_lit_fraction"].as_f64(),
+        });
+    }
+    eprintln!(
+        "procedural: {} scenes ({} generated, {kept} kept) in {:.1} s → {}",
+        args.procedural,
+        args.procedural as usize - kept,
+        start.elapsed().as_secs_f64(),
+        out.join("scenes").display()
+    );
+    Ok(ProceduralRecord {
+        count: args.procedural,
+        seed: args.seed,
+        generator_version: hush_scene::procedural::GENERATOR_VERSION,
+        features: options.features.describe(),
+        scenes,
+    })
 }
 
 fn check(dir: &Path) -> Result<()> {

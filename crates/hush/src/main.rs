@@ -8,6 +8,7 @@ mod denoise_cmd;
 mod denoiser;
 mod eval_cmd;
 mod render_cmd;
+mod scene_cmd;
 mod train_cmd;
 
 use clap::Parser;
@@ -17,6 +18,7 @@ fn main() {
     let result = match cli.command {
         cli::Command::Render(args) => render_cmd::run(args),
         cli::Command::Dataset(args) => dataset_cmd::run(args),
+        cli::Command::Scene(args) => scene_cmd::run(args),
         cli::Command::Train(args) => train_cmd::run(args),
         cli::Command::Denoise(args) => denoise_cmd::run(args),
         cli::Command::Eval(args) => eval_cmd::run(args),

@@ -77,6 +77,13 @@ pub fn render_with_progress(
     Ok(out)
 }
 
+/// The mean Rec. 709 luminance of an image's finite pixels (0 for none).
+fn mean_luminance(image: &hush_dataset::Image) -> f64 {
+    let values: Vec<f64> =
+        image.data.chunks_exact(3).map(|p| hush_dataset::luminance(p) as f64).filter(|l| l.is_finite()).collect();
+    values.iter().sum::<f64>() / values.len().max(1) as f64
+}
+
 pub fn run(args: RenderArgs) -> Result<()> {
     if args.spp == 0 {
         bail!("--spp must be at least 1");
@@ -126,6 +133,9 @@ pub fn run(args: RenderArgs) -> Result<()> {
             "mpaths_per_second": paths / out.seconds / 1e6,
             "mpaths_per_cpu_second": paths / cpu / 1e6,
             "adapter": gpu.describe(),
+            "non_finite_values": out.color.count_non_finite(),
+            "discarded_samples": out.discarded_samples,
+            "mean_luminance": mean_luminance(&out.color),
         });
         hush_dataset::write_atomic(stats, |tmp| std::fs::write(tmp, serde_json::to_string_pretty(&json)?))
             .with_context(|| format!("writing {}", stats.display()))?;

@@ -150,6 +150,7 @@ fn config(scenes: &[&str], views: u32, spp: &[u32]) -> DatasetConfig {
             .map(|s| SceneEntry { name: s.to_string(), path: format!("{s}/scene.xml"), split: None, triangles: 2 })
             .collect(),
         skipped: Vec::new(),
+        procedural: None,
     }
 }
 

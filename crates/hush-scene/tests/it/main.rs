@@ -4,6 +4,7 @@
 mod bad_input;
 mod bvh;
 mod formats;
+mod procedural;
 mod scenes;
 mod shapes;
 mod transforms;

@@ -1,0 +1,1015 @@
+//! Seeded procedural scenes: rooms of random size with windows and doors cut into their walls,
+//! furniture-like primitives (boxes, tables, shelves, spheres, cylinders, optionally meshes
+//! borrowed from other scenes), random materials and random lights, written as Mitsuba 3 XML
+//! that [`Scene::load`](crate::Scene::load) reads back without a warning.
+//!
+//! [`generate`] is pure: it returns the XML text and the assets the XML names (a cylinder OBJ,
+//! texture and environment PNGs), to be written next to the scene file by the caller. The
+//! same seed and options give byte-identical output on every platform: every number comes from
+//! a SplitMix64 stream through IEEE-exact f32 arithmetic (no transcendental function reaches the
+//! XML; rotations are written as angles for the loader) and is printed rounded.
+//!
+//! [`Features`] says what the generator may use. The default, [`Features::KERNEL`], is what
+//! hush's path tracer renders today (diffuse, smooth and rough conductors, smooth plastic,
+//! smooth and thin dielectrics, area lights); [`Features::ALL`] adds rough dielectrics, rough
+//! plastic, bitmap textures and environment emitters (`constant`, `envmap`).
+//!
+//! Every scene has a style drawn from its seed: `standard` (mixed materials and lights),
+//! `dark` (dark surfaces, one dim small light), `glass` (most objects glass) and `spotlit`
+//! (lit mostly by tiny, very bright lights, the source of fireflies).
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use glam::Vec3;
+
+/// Bumped whenever the same seed and options would give a different scene.
+pub const GENERATOR_VERSION: u32 = 1;
+
+/// What the generator may put into a scene beyond what hush's kernel renders today.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Features {
+    /// `roughdielectric` (frosted glass).
+    pub rough_dielectric: bool,
+    /// `roughplastic`.
+    pub rough_plastic: bool,
+    /// `bitmap` textures on diffuse surfaces (generated PNGs).
+    pub textures: bool,
+    /// `constant` and `envmap` emitters (the envmap is a generated PNG sky).
+    pub environment: bool,
+}
+
+impl Features {
+    /// What hush's path tracer renders today.
+    pub const KERNEL: Features =
+        Features { rough_dielectric: false, rough_plastic: false, textures: false, environment: false };
+    /// Everything the generator knows.
+    pub const ALL: Features =
+        Features { rough_dielectric: true, rough_plastic: true, textures: true, environment: true };
+    /// The names accepted by [`Features::parse`] for the single features.
+    pub const NAMES: [&'static str; 4] = ["roughdielectric", "roughplastic", "textures", "environment"];
+
+    /// `default` (= [`Features::KERNEL`]), `all`, or a comma-separated list of [`Features::NAMES`].
+    pub fn parse(text: &str) -> Result<Features, String> {
+        let mut f = Features::KERNEL;
+        for word in text.split(',').map(str::trim).filter(|w| !w.is_empty()) {
+            match word {
+                "default" | "kernel" => {}
+                "all" => f = Features::ALL,
+                "roughdielectric" => f.rough_dielectric = true,
+                "roughplastic" => f.rough_plastic = true,
+                "textures" => f.textures = true,
+                "environment" => f.environment = true,
+                other => {
+                    return Err(format!(
+                        "unknown generator feature '{other}': use default, all, or a list of {}",
+                        Features::NAMES.join(", ")
+                    ));
+                }
+            }
+        }
+        Ok(f)
+    }
+
+    /// The inverse of [`Features::parse`]: `default`, `all` or the list of enabled features.
+    pub fn describe(&self) -> String {
+        if *self == Features::KERNEL {
+            return "default".into();
+        }
+        if *self == Features::ALL {
+            return "all".into();
+        }
+        let on = [self.rough_dielectric, self.rough_plastic, self.textures, self.environment];
+        Features::NAMES.iter().zip(on).filter(|(_, on)| *on).map(|(n, _)| *n).collect::<Vec<_>>().join(",")
+    }
+}
+
+/// How to generate: which features, the film size, and where meshes may be borrowed from.
+#[derive(Clone, Debug)]
+pub struct GeneratorOptions {
+    pub features: Features,
+    pub width: u32,
+    pub height: u32,
+    /// A folder of scenes (such as `../shared/scenes`): small OBJ meshes below its `*/models/` folders
+    /// may be placed as furniture, referenced by absolute path. Ignored when the folder is absent.
+    pub borrow_meshes: Option<PathBuf>,
+}
+
+impl Default for GeneratorOptions {
+    fn default() -> Self {
+        GeneratorOptions { features: Features::KERNEL, width: 256, height: 256, borrow_meshes: None }
+    }
+}
+
+/// A file the scene names, to be written next to it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Asset {
+    /// File name relative to the scene file.
+    pub file: String,
+    pub bytes: Vec<u8>,
+}
+
+/// The broad kind of a surface, for reporting a dataset's material mix.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum MaterialClass {
+    Diffuse,
+    /// Rough conductors and (rough) plastic.
+    Glossy,
+    Mirror,
+    Glass,
+    /// Diffuse with a bitmap texture.
+    Textured,
+}
+
+impl MaterialClass {
+    pub const ALL: [MaterialClass; 5] = [
+        MaterialClass::Diffuse,
+        MaterialClass::Glossy,
+        MaterialClass::Mirror,
+        MaterialClass::Glass,
+        MaterialClass::Textured,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            MaterialClass::Diffuse => "diffuse",
+            MaterialClass::Glossy => "glossy",
+            MaterialClass::Mirror => "mirror",
+            MaterialClass::Glass => "glass",
+            MaterialClass::Textured => "textured",
+        }
+    }
+}
+
+/// The kind of a light, for reporting.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum LightKind {
+    /// A ceiling panel of about a square metre.
+    LargeArea,
+    /// A small panel or disk.
+    SmallArea,
+    /// A tiny sphere of very high radiance.
+    BrightSmall,
+    /// A panel outside a window or door, facing in.
+    Window,
+    /// `constant` environment.
+    Constant,
+    /// `envmap` environment.
+    EnvMap,
+}
+
+impl LightKind {
+    pub const ALL: [LightKind; 6] = [
+        LightKind::LargeArea,
+        LightKind::SmallArea,
+        LightKind::BrightSmall,
+        LightKind::Window,
+        LightKind::Constant,
+        LightKind::EnvMap,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            LightKind::LargeArea => "large_area",
+            LightKind::SmallArea => "small_area",
+            LightKind::BrightSmall => "bright_small",
+            LightKind::Window => "window",
+            LightKind::Constant => "constant",
+            LightKind::EnvMap => "envmap",
+        }
+    }
+}
+
+/// One `<shape>` of a generated scene, in document order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShapeInfo {
+    pub id: String,
+    /// Mitsuba's plugin name of its BSDF (`diffuse`, `roughconductor`, ...), as [`crate::Material::kind`].
+    pub bsdf: &'static str,
+    pub class: MaterialClass,
+    pub emitter: bool,
+}
+
+/// A generated scene: the XML, its assets and what it contains.
+#[derive(Clone, Debug)]
+pub struct GeneratedScene {
+    pub seed: u64,
+    pub style: &'static str,
+    pub xml: String,
+    pub assets: Vec<Asset>,
+    pub shapes: Vec<ShapeInfo>,
+    pub lights: Vec<LightKind>,
+}
+
+impl GeneratedScene {
+    /// The material class of every non-emitting shape.
+    pub fn material_classes(&self) -> Vec<MaterialClass> {
+        self.shapes.iter().filter(|s| !s.emitter).map(|s| s.class).collect()
+    }
+}
+
+/// The seed of attempt `attempt` of scene `index` of a run seeded with `seed` (attempts follow
+/// a rejected scene).
+pub fn scene_seed(seed: u64, index: u64, attempt: u64) -> u64 {
+    let mut r = Rng(seed ^ 0x6875_7368_7363_6e65);
+    let a = r.next_u64() ^ index.wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    let mut r = Rng(a);
+    r.next_u64() ^ attempt.wrapping_mul(0xD1B5_4A32_D192_ED03)
+}
+
+/// Generates the scene of `seed`.
+pub fn generate(seed: u64, options: &GeneratorOptions) -> GeneratedScene {
+    let mut g = Gen::new(seed, options);
+    g.scene();
+    g.finish()
+}
+
+/// SplitMix64 (Steele, Lea and Flood): tiny, seedable and the same everywhere.
+struct Rng(u64);
+
+impl Rng {
+    fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in [0, 1), a multiple of 2^-24 (exact in f32).
+    fn unit(&mut self) -> f32 {
+        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    fn range(&mut self, lo: f32, hi: f32) -> f32 {
+        lo + (hi - lo) * self.unit()
+    }
+
+    fn below(&mut self, n: usize) -> usize {
+        (self.next_u64() % n.max(1) as u64) as usize
+    }
+
+    fn chance(&mut self, p: f32) -> bool {
+        self.unit() < p
+    }
+
+    /// An index drawn in proportion to `weights`.
+    fn weighted(&mut self, weights: &[f32]) -> usize {
+        let total: f32 = weights.iter().sum();
+        let mut x = self.unit() * total;
+        for (i, w) in weights.iter().enumerate() {
+            if x < *w {
+                return i;
+            }
+            x -= w;
+        }
+        weights.iter().rposition(|w| *w > 0.0).unwrap_or(0)
+    }
+
+    /// A colour with each channel in [lo, hi).
+    fn color(&mut self, lo: f32, hi: f32) -> Vec3 {
+        Vec3::new(self.range(lo, hi), self.range(lo, hi), self.range(lo, hi))
+    }
+}
+
+/// A number for the XML: 4 decimals, no negative zero.
+fn num(x: f32) -> String {
+    let s = format!("{x:.4}");
+    let t = s.trim_end_matches('0').trim_end_matches('.');
+    if t == "-0" || t.is_empty() { "0".into() } else { t.to_string() }
+}
+
+fn v3(v: Vec3) -> String {
+    format!("{}, {}, {}", num(v.x), num(v.y), num(v.z))
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Style {
+    Standard,
+    Dark,
+    Glass,
+    Spotlit,
+}
+
+impl Style {
+    fn name(self) -> &'static str {
+        match self {
+            Style::Standard => "standard",
+            Style::Dark => "dark",
+            Style::Glass => "glass",
+            Style::Spotlit => "spotlit",
+        }
+    }
+}
+
+/// A footprint on the floor that other objects keep clear of.
+struct Footprint {
+    x: f32,
+    z: f32,
+    r: f32,
+}
+
+struct Gen<'a> {
+    rng: Rng,
+    seed: u64,
+    options: &'a GeneratorOptions,
+    style: Style,
+    room: Vec3,
+    camera: Vec3,
+    body: String,
+    bsdfs: String,
+    assets: Vec<Asset>,
+    shapes: Vec<ShapeInfo>,
+    lights: Vec<LightKind>,
+    footprints: Vec<Footprint>,
+    materials: usize,
+    environment: Option<String>,
+    cylinder: bool,
+    borrowable: Vec<(PathBuf, Vec3, Vec3)>,
+}
+
+/// A BSDF written into the XML, with what it is.
+#[derive(Clone)]
+struct Bsdf {
+    id: String,
+    kind: &'static str,
+    class: MaterialClass,
+}
+
+impl<'a> Gen<'a> {
+    fn new(seed: u64, options: &'a GeneratorOptions) -> Self {
+        let mut rng = Rng(seed);
+        let style = match rng.weighted(&[0.55, 0.15, 0.15, 0.15]) {
+            0 => Style::Standard,
+            1 => Style::Dark,
+            2 => Style::Glass,
+            _ => Style::Spotlit,
+        };
+        Gen {
+            rng,
+            seed,
+            options,
+            style,
+            room: Vec3::ONE,
+            camera: Vec3::ZERO,
+            body: String::new(),
+            bsdfs: String::new(),
+            assets: Vec::new(),
+            shapes: Vec::new(),
+            lights: Vec::new(),
+            footprints: Vec::new(),
+            materials: 0,
+            environment: None,
+            cylinder: false,
+            borrowable: options.borrow_meshes.as_deref().map(borrowable_meshes).unwrap_or_default(),
+        }
+    }
+
+    fn scene(&mut self) {
+        let r = &mut self.rng;
+        self.room = Vec3::new(r.range(3.0, 9.0), r.range(2.4, 4.0), r.range(3.0, 9.0));
+        let room = self.room;
+        // The camera stands near the z = 0 wall and looks into the room.
+        self.camera = Vec3::new(
+            r.range(0.25, 0.75) * room.x,
+            r.range(1.0, (room.y - 0.4).min(1.8)),
+            r.range(0.3, 0.9).min(0.2 * room.z),
+        );
+        let target = Vec3::new(r.range(0.2, 0.8) * room.x, r.range(0.4, 1.4), r.range(0.55, 0.95) * room.z);
+        let fov = r.range(40.0, 75.0);
+        self.footprints.push(Footprint { x: self.camera.x, z: self.camera.z, r: 0.5 });
+
+        self.room_shell();
+        self.lights_inside();
+        self.furniture();
+        self.environment_light();
+        self.write_header(target, fov);
+    }
+
+    fn write_header(&mut self, target: Vec3, fov: f32) {
+        let o = self.options;
+        let mut head = String::new();
+        let _ = writeln!(head, "<?xml version=\"1.0\" encoding=\"utf-8\"?>");
+        let _ = writeln!(
+            head,
+            "<!-- hush procedural scene: generator {GENERATOR_VERSION}, seed {}, style {}, features {} -->",
+            self.seed,
+            self.style.name(),
+            o.features.describe()
+        );
+        let _ = writeln!(head, "<scene version=\"3.0.0\">");
+        let _ = writeln!(head, "  <integrator type=\"path\"><integer name=\"max_depth\" value=\"8\"/></integrator>");
+        let _ = writeln!(head, "  <sensor type=\"perspective\">");
+        let _ = writeln!(head, "    <float name=\"fov\" value=\"{}\"/>", num(fov));
+        let _ = writeln!(head, "    <string name=\"fov_axis\" value=\"y\"/>");
+        let _ = writeln!(
+            head,
+            "    <transform name=\"to_world\"><lookat origin=\"{}\" target=\"{}\" up=\"0, 1, 0\"/></transform>",
+            v3(self.camera),
+            v3(target)
+        );
+        let _ =
+            writeln!(head, "    <sampler type=\"independent\"><integer name=\"sample_count\" value=\"64\"/></sampler>");
+        let _ = writeln!(
+            head,
+            "    <film type=\"hdrfilm\"><integer name=\"width\" value=\"{}\"/><integer name=\"height\" value=\"{}\"/>\
+             <rfilter type=\"box\"/></film>",
+            o.width.max(1),
+            o.height.max(1)
+        );
+        let _ = writeln!(head, "  </sensor>");
+        head.push_str(&self.bsdfs);
+        head.push_str(&self.body);
+        if let Some(env) = &self.environment {
+            head.push_str(env);
+        }
+        head.push_str("</scene>\n");
+        self.body = head;
+    }
+
+    fn finish(mut self) -> GeneratedScene {
+        if self.cylinder {
+            self.assets.push(Asset { file: "cylinder.obj".into(), bytes: cylinder_obj(32).into_bytes() });
+        }
+        GeneratedScene {
+            seed: self.seed,
+            style: self.style.name(),
+            xml: self.body,
+            assets: self.assets,
+            shapes: self.shapes,
+            lights: self.lights,
+        }
+    }
+
+    // ---- materials ----
+
+    fn bsdf(&mut self, kind: &'static str, class: MaterialClass, params: &str, two_sided: bool) -> Bsdf {
+        let id = format!("bsdf{}", self.materials);
+        self.materials += 1;
+        let inner = format!("<bsdf type=\"{kind}\">{params}</bsdf>");
+        let _ = if two_sided {
+            writeln!(self.bsdfs, "  <bsdf type=\"twosided\" id=\"{id}\">{inner}</bsdf>")
+        } else {
+            writeln!(self.bsdfs, "  {}", inner.replacen("<bsdf ", &format!("<bsdf id=\"{id}\" "), 1))
+        };
+        Bsdf { id, kind, class }
+    }
+
+    fn diffuse(&mut self, albedo: Vec3) -> Bsdf {
+        let p = format!("<rgb name=\"reflectance\" value=\"{}\"/>", v3(albedo));
+        self.bsdf("diffuse", MaterialClass::Diffuse, &p, true)
+    }
+
+    /// A diffuse surface with a generated texture (checks, stripes or tiles of two colours).
+    fn textured(&mut self, a: Vec3, b: Vec3) -> Bsdf {
+        let file = format!("texture{}.png", self.assets.len());
+        let pattern = self.rng.below(3);
+        let cells = [2u32, 4, 8][self.rng.below(3)];
+        let size = 64u32;
+        let mut rgb = Vec::with_capacity((size * size * 3) as usize);
+        for y in 0..size {
+            for x in 0..size {
+                let (cx, cy) = (x * cells / size, y * cells / size);
+                let pick = match pattern {
+                    0 => (cx + cy) % 2 == 0,
+                    1 => cx % 2 == 0,
+                    _ => x % (size / cells) > 1 && y % (size / cells) > 1,
+                };
+                let c = if pick { a } else { b };
+                rgb.extend([c.x, c.y, c.z].map(|v| (v.clamp(0.0, 1.0) * 255.0) as u8));
+            }
+        }
+        self.assets.push(Asset { file: file.clone(), bytes: png(size, size, rgb) });
+        let p = format!(
+            "<texture type=\"bitmap\" name=\"reflectance\"><string name=\"filename\" value=\"{file}\"/></texture>"
+        );
+        self.bsdf("diffuse", MaterialClass::Textured, &p, true)
+    }
+
+    /// A random surface for an object; `glass_bias` raises the odds of glass.
+    fn random_material(&mut self, glass_bias: f32) -> Bsdf {
+        let f = self.options.features;
+        let dark = self.style == Style::Dark;
+        let weights = [
+            3.0,                                     // diffuse
+            1.5,                                     // rough conductor
+            1.0,                                     // smooth plastic
+            if f.rough_plastic { 1.0 } else { 0.0 }, // rough plastic
+            0.6,                                     // mirror
+            1.0 + glass_bias,                        // smooth glass
+            if f.rough_dielectric { 0.5 + glass_bias * 0.5 } else { 0.0 },
+            if f.textures { 1.0 } else { 0.0 },
+        ];
+        let (lo, hi) = if dark { (0.02, 0.25) } else { (0.05, 0.85) };
+        match self.rng.weighted(&weights) {
+            0 => {
+                let c = self.rng.color(lo, hi);
+                self.diffuse(c)
+            }
+            1 => {
+                let metal = ["Au", "Cu", "Al", "Ag", "Cr"][self.rng.below(5)];
+                let alpha = self.rng.range(0.03, 0.4);
+                let p = format!(
+                    "<string name=\"material\" value=\"{metal}\"/><float name=\"alpha\" value=\"{}\"/>\
+                     <string name=\"distribution\" value=\"ggx\"/>",
+                    num(alpha)
+                );
+                self.bsdf("roughconductor", MaterialClass::Glossy, &p, true)
+            }
+            k @ (2 | 3) => {
+                let c = self.rng.color(lo, hi);
+                let mut p = format!(
+                    "<rgb name=\"diffuse_reflectance\" value=\"{}\"/><float name=\"int_ior\" value=\"{}\"/>",
+                    v3(c),
+                    num(self.rng.range(1.4, 1.6))
+                );
+                if k == 3 {
+                    let alpha = self.rng.range(0.05, 0.4);
+                    let _ = write!(
+                        p,
+                        "<float name=\"alpha\" value=\"{}\"/><string name=\"distribution\" value=\"ggx\"/>",
+                        num(alpha)
+                    );
+                    self.bsdf("roughplastic", MaterialClass::Glossy, &p, true)
+                } else {
+                    self.bsdf("plastic", MaterialClass::Glossy, &p, true)
+                }
+            }
+            4 => {
+                let tint = self.rng.color(0.7, 1.0);
+                let p = format!(
+                    "<string name=\"material\" value=\"none\"/><rgb name=\"specular_reflectance\" value=\"{}\"/>",
+                    v3(tint)
+                );
+                self.bsdf("conductor", MaterialClass::Mirror, &p, true)
+            }
+            5 => {
+                let ior = self.rng.range(1.33, 1.7);
+                let tint = if self.rng.chance(0.3) { self.rng.color(0.5, 1.0) } else { Vec3::ONE };
+                let p = format!(
+                    "<float name=\"int_ior\" value=\"{}\"/><rgb name=\"specular_transmittance\" value=\"{}\"/>",
+                    num(ior),
+                    v3(tint)
+                );
+                self.bsdf("dielectric", MaterialClass::Glass, &p, false)
+            }
+            6 => {
+                let p = format!(
+                    "<float name=\"int_ior\" value=\"{}\"/><float name=\"alpha\" value=\"{}\"/>\
+                     <string name=\"distribution\" value=\"ggx\"/>",
+                    num(self.rng.range(1.33, 1.7)),
+                    num(self.rng.range(0.05, 0.3))
+                );
+                self.bsdf("roughdielectric", MaterialClass::Glass, &p, false)
+            }
+            _ => {
+                let (a, b) = (self.rng.color(lo, hi), self.rng.color(lo, hi));
+                self.textured(a, b)
+            }
+        }
+    }
+
+    /// A surface for a wall, the floor or the ceiling: mostly diffuse.
+    fn surface_material(&mut self) -> Bsdf {
+        let (lo, hi) = if self.style == Style::Dark { (0.02, 0.2) } else { (0.2, 0.85) };
+        if self.options.features.textures && self.rng.chance(0.3) {
+            let (a, b) = (self.rng.color(lo, hi), self.rng.color(lo, hi));
+            return self.textured(a, b);
+        }
+        if self.rng.chance(0.15) {
+            let c = self.rng.color(lo, hi);
+            let p = format!("<rgb name=\"diffuse_reflectance\" value=\"{}\"/>", v3(c));
+            return self.bsdf("plastic", MaterialClass::Glossy, &p, true);
+        }
+        let grey = self.rng.range(lo, hi);
+        let c = Vec3::splat(grey) * self.rng.color(0.8, 1.0);
+        self.diffuse(c)
+    }
+
+    // ---- shapes ----
+
+    fn shape(&mut self, ty: &str, name: &str, transform: &str, bsdf: &Bsdf, extra: &str, emission: Option<Vec3>) {
+        let id = format!("{name}{}", self.shapes.len());
+        let _ = write!(self.body, "  <shape type=\"{ty}\" id=\"{id}\">{extra}");
+        let _ = write!(self.body, "<transform name=\"to_world\">{transform}</transform><ref id=\"{}\"/>", bsdf.id);
+        if let Some(e) = emission {
+            let _ = write!(self.body, "<emitter type=\"area\"><rgb name=\"radiance\" value=\"{}\"/></emitter>", v3(e));
+        }
+        let _ = writeln!(self.body, "</shape>");
+        self.shapes.push(ShapeInfo { id, bsdf: bsdf.kind, class: bsdf.class, emitter: emission.is_some() });
+    }
+
+    /// A rectangle centred at `c` spanning ±`u` and ±`v`, its front facing `facing`.
+    fn rectangle(&mut self, name: &str, c: Vec3, [u, v]: [Vec3; 2], facing: Vec3, bsdf: &Bsdf, emission: Option<Vec3>) {
+        let v = if u.cross(v).dot(facing) < 0.0 { -v } else { v };
+        let n = u.cross(v).normalize();
+        let m = [[u.x, v.x, n.x, c.x], [u.y, v.y, n.y, c.y], [u.z, v.z, n.z, c.z], [0.0, 0.0, 0.0, 1.0]];
+        let values: Vec<String> = m.iter().flatten().map(|x| num(*x)).collect();
+        let t = format!("<matrix value=\"{}\"/>", values.join(" "));
+        self.shape("rectangle", name, &t, bsdf, "", emission);
+    }
+
+    /// `scale`, then a turn about +y by `angle` degrees, then `translate`.
+    fn placed(scale: Vec3, angle: f32, at: Vec3) -> String {
+        let mut t = format!("<scale value=\"{}\"/>", v3(scale));
+        if angle != 0.0 {
+            let _ = write!(t, "<rotate y=\"1\" angle=\"{}\"/>", num(angle));
+        }
+        let _ = write!(t, "<translate value=\"{}\"/>", v3(at));
+        t
+    }
+
+    fn room_shell(&mut self) {
+        let room = self.room;
+        let (w, h, d) = (room.x, room.y, room.z);
+        let floor = self.surface_material();
+        let half = Vec3::new(w / 2.0, 0.0, d / 2.0);
+        self.rectangle("floor", half, [Vec3::X * half.x, Vec3::Z * half.z], Vec3::Y, &floor, None);
+        let ceiling = self.surface_material();
+        self.rectangle("ceiling", half + Vec3::Y * h, [Vec3::X * half.x, Vec3::Z * half.z], -Vec3::Y, &ceiling, None);
+        let wall = self.surface_material();
+        // Walls: (corner, direction along the wall, length, inward normal).
+        let walls = [
+            (Vec3::ZERO, Vec3::X, w, Vec3::Z),
+            (Vec3::new(0.0, 0.0, d), Vec3::X, w, -Vec3::Z),
+            (Vec3::ZERO, Vec3::Z, d, Vec3::X),
+            (Vec3::new(w, 0.0, 0.0), Vec3::Z, d, -Vec3::X),
+        ];
+        let openings = match self.style {
+            Style::Dark => self.rng.below(2),
+            _ => self.rng.below(4),
+        };
+        let mut with_opening = [false; 4];
+        for _ in 0..openings {
+            with_opening[self.rng.below(4)] = true;
+        }
+        for (k, &(p0, t, len, n)) in walls.iter().enumerate() {
+            let wall_bsdf = if self.rng.chance(0.2) { self.surface_material() } else { wall.clone() };
+            if !with_opening[k] || len < 1.6 {
+                self.wall_piece(p0, t, n, [0.0, len], [0.0, h], &wall_bsdf);
+                continue;
+            }
+            let door = self.rng.chance(0.35);
+            let width = self.rng.range(0.7, (len - 0.6).min(2.5));
+            let a0 = self.rng.range(0.3, len - 0.3 - width);
+            let a1 = a0 + width;
+            let (b0, b1) = if door {
+                (0.0, self.rng.range(1.8, (h - 0.2).max(1.9)).min(h - 0.1))
+            } else {
+                let b0 = self.rng.range(0.6, 1.1);
+                (b0, self.rng.range(b0 + 0.6, h - 0.2).max(b0 + 0.5).min(h - 0.1))
+            };
+            self.wall_piece(p0, t, n, [0.0, a0], [0.0, h], &wall_bsdf);
+            self.wall_piece(p0, t, n, [a1, len], [0.0, h], &wall_bsdf);
+            if b0 > 0.0 {
+                self.wall_piece(p0, t, n, [a0, a1], [0.0, b0], &wall_bsdf);
+            }
+            self.wall_piece(p0, t, n, [a0, a1], [b1, h], &wall_bsdf);
+            let centre = p0 + t * (a0 + a1) / 2.0 + Vec3::Y * (b0 + b1) / 2.0;
+            let (hu, hv) = ((a1 - a0) / 2.0, (b1 - b0) / 2.0);
+            // A glass pane in some windows (always in glass scenes).
+            if !door && (self.style == Style::Glass || self.rng.chance(0.3)) {
+                let p = "<float name=\"int_ior\" value=\"1.5\"/>";
+                let pane = self.bsdf("thindielectric", MaterialClass::Glass, p, false);
+                self.rectangle("pane", centre, [t * hu, Vec3::Y * hv], n, &pane, None);
+            }
+            // Daylight: a panel outside, facing in (not in dark scenes, not always).
+            if self.style != Style::Dark && self.rng.chance(0.7) {
+                let dist = self.rng.range(0.5, 2.5);
+                let grow = 1.0 + dist;
+                let sky = Vec3::new(0.55, 0.75, 1.0) * self.rng.range(0.7, 1.0) + self.rng.color(0.0, 0.3);
+                let radiance = sky * self.rng.range(1.0, 8.0);
+                let black = self.black();
+                self.rectangle(
+                    "daylight",
+                    centre - n * dist,
+                    [t * hu * grow, Vec3::Y * hv * grow],
+                    n,
+                    &black,
+                    Some(radiance),
+                );
+                self.lights.push(LightKind::Window);
+            }
+        }
+    }
+
+    fn black(&mut self) -> Bsdf {
+        self.diffuse(Vec3::ZERO)
+    }
+
+    fn wall_piece(&mut self, p0: Vec3, t: Vec3, n: Vec3, a: [f32; 2], b: [f32; 2], bsdf: &Bsdf) {
+        if a[1] - a[0] < 1e-3 || b[1] - b[0] < 1e-3 {
+            return;
+        }
+        let c = p0 + t * (a[0] + a[1]) / 2.0 + Vec3::Y * (b[0] + b[1]) / 2.0;
+        self.rectangle("wall", c, [t * (a[1] - a[0]) / 2.0, Vec3::Y * (b[1] - b[0]) / 2.0], n, bsdf, None);
+    }
+
+    /// A point on the ceiling at least `margin` from the walls.
+    fn ceiling_point(&mut self, margin: f32) -> Vec3 {
+        let room = self.room;
+        Vec3::new(self.rng.range(margin, room.x - margin), room.y - 0.002, self.rng.range(margin, room.z - margin))
+    }
+
+    fn lights_inside(&mut self) {
+        let warm = |r: &mut Rng| Vec3::new(1.0, r.range(0.75, 1.0), r.range(0.5, 0.95));
+        let (large, small, bright) = match self.style {
+            Style::Standard => (1 + self.rng.below(2), self.rng.below(3), self.rng.below(2)),
+            Style::Glass => (1, self.rng.below(2), self.rng.below(3)),
+            Style::Spotlit => (0, self.rng.below(2), 1 + self.rng.below(3)),
+            Style::Dark => (0, 1, 0),
+        };
+        for _ in 0..large {
+            let (hx, hz) = (self.rng.range(0.3, 1.0), self.rng.range(0.3, 1.0));
+            let c = self.ceiling_point(hx.max(hz) + 0.1);
+            let radiance = warm(&mut self.rng) * self.rng.range(2.0, 12.0);
+            let black = self.black();
+            self.rectangle("panel", c, [Vec3::X * hx, Vec3::Z * hz], -Vec3::Y, &black, Some(radiance));
+            self.lights.push(LightKind::LargeArea);
+        }
+        for _ in 0..small {
+            let size = self.rng.range(0.05, 0.2);
+            let radiance = warm(&mut self.rng)
+                * if self.style == Style::Dark { self.rng.range(3.0, 20.0) } else { self.rng.range(20.0, 200.0) };
+            let black = self.black();
+            if self.rng.chance(0.5) {
+                let c = self.ceiling_point(size + 0.1);
+                // A disk faces +z: turned about +x by 90° it faces down.
+                let t = format!(
+                    "<scale value=\"{}\"/><rotate x=\"1\" angle=\"90\"/><translate value=\"{}\"/>",
+                    v3(Vec3::new(size, size, 1.0)),
+                    v3(c)
+                );
+                self.shape("disk", "lamp", &t, &black, "", Some(radiance));
+            } else {
+                let c = self.ceiling_point(size + 0.1);
+                self.rectangle("lamp", c, [Vec3::X * size, Vec3::Z * size], -Vec3::Y, &black, Some(radiance));
+            }
+            self.lights.push(LightKind::SmallArea);
+        }
+        for _ in 0..bright {
+            let r = self.rng.range(0.02, 0.08);
+            let room = self.room;
+            let c = Vec3::new(
+                self.rng.range(0.3, room.x - 0.3),
+                self.rng.range(1.4, room.y - 0.2),
+                self.rng.range(0.4, 0.9) * room.z,
+            );
+            let radiance = warm(&mut self.rng) * self.rng.range(300.0, 3000.0);
+            let black = self.black();
+            let extra =
+                format!("<point name=\"center\" value=\"{}\"/><float name=\"radius\" value=\"{}\"/>", v3(c), num(r));
+            self.shape("sphere", "bulb", "", &black, &extra, Some(radiance));
+            self.lights.push(LightKind::BrightSmall);
+        }
+    }
+
+    /// Finds a free spot on the floor for an object of footprint radius `r`.
+    fn free_spot(&mut self, r: f32) -> Option<(f32, f32)> {
+        let room = self.room;
+        if room.x < 2.0 * r + 0.2 || room.z < 2.0 * r + 0.2 {
+            return None;
+        }
+        for _ in 0..24 {
+            let x = self.rng.range(r + 0.1, room.x - r - 0.1);
+            let z = self.rng.range(r + 0.1, room.z - r - 0.1);
+            if self.footprints.iter().all(|f| (f.x - x).powi(2) + (f.z - z).powi(2) > (f.r + r + 0.05).powi(2)) {
+                self.footprints.push(Footprint { x, z, r });
+                return Some((x, z));
+            }
+        }
+        None
+    }
+
+    fn furniture(&mut self) {
+        let count = 2 + self.rng.below(7);
+        let glass_bias = if self.style == Style::Glass { 6.0 } else { 0.0 };
+        for _ in 0..count {
+            let borrow = if self.borrowable.is_empty() { 0.0 } else { 1.0 };
+            match self.rng.weighted(&[2.0, 1.5, 1.0, 2.0, 1.5, borrow]) {
+                0 => self.a_box(glass_bias),
+                1 => self.table(glass_bias),
+                2 => self.shelf(glass_bias),
+                3 => self.a_sphere(glass_bias, None),
+                4 => self.a_cylinder(glass_bias),
+                _ => self.borrowed(glass_bias),
+            }
+        }
+    }
+
+    fn a_box(&mut self, glass_bias: f32) {
+        let half = Vec3::new(self.rng.range(0.15, 0.7), self.rng.range(0.15, 0.8), self.rng.range(0.15, 0.7));
+        let angle = self.rng.range(0.0, 90.0);
+        let Some((x, z)) = self.free_spot(half.x.max(half.z) * 1.42) else { return };
+        let m = self.random_material(glass_bias);
+        let t = Self::placed(half, angle, Vec3::new(x, half.y, z));
+        self.shape("cube", "box", &t, &m, "", None);
+    }
+
+    fn table(&mut self, glass_bias: f32) {
+        let (hx, hz) = (self.rng.range(0.4, 1.0), self.rng.range(0.3, 0.6));
+        let height = self.rng.range(0.6, 0.95);
+        let thick = self.rng.range(0.02, 0.05);
+        let angle = [0.0, 90.0][self.rng.below(2)];
+        let Some((x, z)) = self.free_spot(hx.max(hz) * 1.42) else { return };
+        let top = self.random_material(glass_bias);
+        let t = Self::placed(Vec3::new(hx, thick, hz), angle, Vec3::new(x, height - thick, z));
+        self.shape("cube", "tabletop", &t, &top, "", None);
+        let legs = self.random_material(0.0);
+        let (lx, lz) = if angle == 0.0 { (hx - 0.06, hz - 0.06) } else { (hz - 0.06, hx - 0.06) };
+        let leg_r = self.rng.range(0.02, 0.05);
+        for (sx, sz) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+            let at = Vec3::new(x + sx * lx, 0.0, z + sz * lz);
+            let t = Self::placed(Vec3::new(leg_r, height - 2.0 * thick, leg_r), 0.0, at);
+            self.cylinder_shape("leg", &t, &legs);
+        }
+        // Something on the table, sometimes.
+        if self.rng.chance(0.6) {
+            let r = self.rng.range(0.06, hz.min(0.25));
+            let at = Vec3::new(x + self.rng.range(-0.5, 0.5) * lx, height + r, z + self.rng.range(-0.5, 0.5) * lz);
+            self.a_sphere(glass_bias, Some((at, r)));
+        }
+    }
+
+    fn shelf(&mut self, glass_bias: f32) {
+        // A slab on the wall at the far end or a side.
+        let room = self.room;
+        let len = self.rng.range(0.5, 1.5).min(room.x * 0.4);
+        let depth = self.rng.range(0.15, 0.35);
+        let y = self.rng.range(0.6, (room.y - 0.5).max(0.7));
+        let m = self.random_material(glass_bias);
+        let x = self.rng.range(len + 0.05, room.x - len - 0.05);
+        let t = Self::placed(Vec3::new(len, 0.02, depth), 0.0, Vec3::new(x, y, room.z - depth - 0.001));
+        self.shape("cube", "shelf", &t, &m, "", None);
+    }
+
+    fn a_sphere(&mut self, glass_bias: f32, on: Option<(Vec3, f32)>) {
+        let (c, r) = match on {
+            Some(p) => p,
+            None => {
+                let r = self.rng.range(0.12, 0.6);
+                let Some((x, z)) = self.free_spot(r) else { return };
+                (Vec3::new(x, r, z), r)
+            }
+        };
+        let m = self.random_material(glass_bias);
+        let extra =
+            format!("<point name=\"center\" value=\"{}\"/><float name=\"radius\" value=\"{}\"/>", v3(c), num(r));
+        self.shape("sphere", "ball", "", &m, &extra, None);
+    }
+
+    fn a_cylinder(&mut self, glass_bias: f32) {
+        let r = self.rng.range(0.08, 0.4);
+        let h = self.rng.range(0.2, 1.6);
+        let Some((x, z)) = self.free_spot(r) else { return };
+        let m = self.random_material(glass_bias);
+        let t = Self::placed(Vec3::new(r, h, r), 0.0, Vec3::new(x, 0.0, z));
+        self.cylinder_shape("cylinder", &t, &m);
+    }
+
+    fn cylinder_shape(&mut self, name: &str, transform: &str, bsdf: &Bsdf) {
+        self.cylinder = true;
+        let extra = "<string name=\"filename\" value=\"cylinder.obj\"/>";
+        self.shape("obj", name, transform, bsdf, extra, None);
+    }
+
+    fn borrowed(&mut self, glass_bias: f32) {
+        let k = self.rng.below(self.borrowable.len());
+        let (path, lo, hi) = self.borrowable[k].clone();
+        let size = hi - lo;
+        let height = self.rng.range(0.3, 1.2);
+        let s = height / size.y.max(1e-3);
+        let r = 0.5 * s * size.x.max(size.z) * 1.42;
+        let angle = self.rng.range(0.0, 360.0);
+        if r > 1.5 {
+            return;
+        }
+        let Some((x, z)) = self.free_spot(r) else { return };
+        let m = self.random_material(glass_bias);
+        // Centre the mesh on its footprint and stand it on the floor.
+        let centre = (lo + hi) * 0.5;
+        let mut t = format!("<translate value=\"{}\"/>", v3(Vec3::new(-centre.x, -lo.y, -centre.z)));
+        t.push_str(&Self::placed(Vec3::splat(s), angle, Vec3::new(x, 0.0, z)));
+        let extra = format!("<string name=\"filename\" value=\"{}\"/>", xml_escape(&path.display().to_string()));
+        self.shape("obj", "borrowed", &t, &m, &extra, None);
+    }
+
+    fn environment_light(&mut self) {
+        if !self.options.features.environment || self.style == Style::Dark || !self.rng.chance(0.5) {
+            return;
+        }
+        if self.rng.chance(0.4) {
+            let radiance = Vec3::new(0.6, 0.75, 1.0) * self.rng.range(0.2, 2.0);
+            self.environment = Some(format!(
+                "  <emitter type=\"constant\"><rgb name=\"radiance\" value=\"{}\"/></emitter>\n",
+                v3(radiance)
+            ));
+            self.lights.push(LightKind::Constant);
+        } else {
+            let (w, h) = (64u32, 32u32);
+            let zenith = Vec3::new(0.25, 0.45, 0.9) * self.rng.range(0.6, 1.0);
+            let horizon = Vec3::new(0.85, 0.85, 0.8) * self.rng.range(0.7, 1.0);
+            let ground = self.rng.color(0.1, 0.35);
+            let sun = (self.rng.below(w as usize) as u32, 2 + self.rng.below(h as usize / 2 - 3) as u32);
+            let mut rgb = Vec::with_capacity((w * h * 3) as usize);
+            for y in 0..h {
+                for x in 0..w {
+                    let t = y as f32 / (h / 2) as f32;
+                    let mut c = if y < h / 2 { zenith + (horizon - zenith) * t } else { ground };
+                    if x.abs_diff(sun.0) <= 1 && y.abs_diff(sun.1) <= 1 {
+                        c = Vec3::ONE;
+                    }
+                    rgb.extend([c.x, c.y, c.z].map(|v| (v.clamp(0.0, 1.0) * 255.0) as u8));
+                }
+            }
+            let file = "sky.png".to_string();
+            self.assets.push(Asset { file: file.clone(), bytes: png(w, h, rgb) });
+            self.environment = Some(format!(
+                "  <emitter type=\"envmap\"><string name=\"filename\" value=\"{file}\"/>\
+                 <float name=\"scale\" value=\"{}\"/></emitter>\n",
+                num(self.rng.range(1.0, 6.0))
+            ));
+            self.lights.push(LightKind::EnvMap);
+        }
+    }
+}
+
+fn xml_escape(s: &str) -> String {
+    s.replace('&', "&amp;").replace('"', "&quot;").replace('<', "&lt;").replace('>', "&gt;")
+}
+
+/// An 8-bit RGB PNG in memory.
+fn png(width: u32, height: u32, rgb: Vec<u8>) -> Vec<u8> {
+    let img = image::RgbImage::from_raw(width, height, rgb).expect("width × height × 3 bytes");
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut bytes, image::ImageFormat::Png).expect("PNG encoding into memory cannot fail");
+    bytes.into_inner()
+}
+
+/// A closed unit cylinder (radius 1, from y = 0 to y = 1) as OBJ text: smooth sides, flat caps.
+fn cylinder_obj(segments: u32) -> String {
+    let mut s = String::from("# unit cylinder: radius 1, y from 0 to 1\n");
+    let ring: Vec<(f64, f64)> = (0..segments)
+        .map(|j| {
+            let phi = std::f64::consts::TAU * j as f64 / segments as f64;
+            (phi.cos(), phi.sin())
+        })
+        .collect();
+    let f = |x: f64| {
+        let t = format!("{x:.6}");
+        if t == "-0.000000" { "0.000000".to_string() } else { t }
+    };
+    // Side: vertices 1..=2n (bottom, top per segment), normals 1..=n.
+    for &(c, sn) in &ring {
+        let _ = writeln!(s, "v {} 0 {}\nv {} 1 {}", f(c), f(sn), f(c), f(sn));
+    }
+    for &(c, sn) in &ring {
+        let _ = writeln!(s, "vn {} 0 {}", f(c), f(sn));
+    }
+    // Caps: centre vertices and ring copies, normals n+1 (down) and n+2 (up).
+    let n = segments;
+    let _ = writeln!(s, "v 0 0 0\nv 0 1 0\nvn 0 -1 0\nvn 0 1 0");
+    let (bottom, top) = (2 * n + 1, 2 * n + 2);
+    for j in 0..n {
+        let k = (j + 1) % n;
+        let (b0, t0, b1, t1) = (2 * j + 1, 2 * j + 2, 2 * k + 1, 2 * k + 2);
+        let (n0, n1) = (j + 1, k + 1);
+        // Outward winding (counter-clockwise seen from outside).
+        let _ = writeln!(s, "f {b0}//{n0} {t0}//{n0} {t1}//{n1}");
+        let _ = writeln!(s, "f {b0}//{n0} {t1}//{n1} {b1}//{n1}");
+        let _ = writeln!(s, "f {bottom}//{} {b0}//{} {b1}//{}", n + 1, n + 1, n + 1);
+        let _ = writeln!(s, "f {top}//{} {t1}//{} {t0}//{}", n + 2, n + 2, n + 2);
+    }
+    s
+}
+
+/// Small OBJ meshes (at most 400 kB) below `dir/*/models/`, with their bounds, sorted by path.
+fn borrowable_meshes(dir: &Path) -> Vec<(PathBuf, Vec3, Vec3)> {
+    const MAX_BYTES: u64 = 400_000;
+    let Ok(scenes) = std::fs::read_dir(dir) else { return Vec::new() };
+    let mut files: Vec<PathBuf> = scenes
+        .filter_map(|e| e.ok())
+        .filter_map(|e| std::fs::read_dir(e.path().join("models")).ok())
+        .flat_map(|r| r.filter_map(|e| e.ok()).map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("obj")))
+        .filter(|p| std::fs::metadata(p).is_ok_and(|m| m.len() <= MAX_BYTES))
+        .collect();
+    files.sort();
+    files
+        .into_iter()
+        .filter_map(|path| {
+            let path = path.canonicalize().ok()?;
+            let obj = crate::obj::read_obj(&path, false).ok()?;
+            let g = crate::obj::merge(obj.objects);
+            if g.indices.len() < 12 {
+                return None;
+            }
+            let lo = g.positions.iter().fold(Vec3::splat(f32::INFINITY), |a, p| a.min(*p));
+            let hi = g.positions.iter().fold(Vec3::splat(f32::NEG_INFINITY), |a, p| a.max(*p));
+            let size = hi - lo;
+            // Skip flat pieces (walls, floors): furniture has some extent in every direction.
+            (lo.is_finite() && hi.is_finite() && size.min_element() > 0.05 * size.max_element())
+                .then_some((path, lo, hi))
+        })
+        .collect()
+}
