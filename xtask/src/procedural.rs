@@ -15,7 +15,7 @@ use std::time::Instant;
 use crate::util::{Result, build_hush, ensure_vulkan, read_json, release, target_dir, write_json};
 
 const USAGE: &str = "usage: cargo xtask procedural check [--count N] [--seed S] [--size PX] [--spp N] \
-                     [--features default|all|...] [--release] [--hush PATH]";
+                     [--features default|basic|...] [--release] [--hush PATH]";
 
 pub fn run(args: &[String]) -> Result<()> {
     match args.first().map(String::as_str) {

@@ -24,7 +24,7 @@ use std::path::{Path, PathBuf};
 use glam::Vec3;
 
 /// Bumped whenever the same seed and options would give a different scene.
-pub const GENERATOR_VERSION: u32 = 1;
+pub const GENERATOR_VERSION: u32 = 2;
 
 /// What the generator may put into a scene beyond what hush's kernel renders today.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -40,29 +40,37 @@ pub struct Features {
 }
 
 impl Features {
-    /// What hush's path tracer renders today.
-    pub const KERNEL: Features =
+    /// None of the optional features: smooth glass, glossy metal, plastic and diffuse surfaces lit by area
+    /// lights (generator version 1's default).
+    pub const BASIC: Features =
         Features { rough_dielectric: false, rough_plastic: false, textures: false, environment: false };
     /// Everything the generator knows.
     pub const ALL: Features =
         Features { rough_dielectric: true, rough_plastic: true, textures: true, environment: true };
+    /// What hush's path tracer renders: since generator version 2, everything.
+    pub const KERNEL: Features = Features::ALL;
     /// The names accepted by [`Features::parse`] for the single features.
     pub const NAMES: [&'static str; 4] = ["roughdielectric", "roughplastic", "textures", "environment"];
 
-    /// `default` (= [`Features::KERNEL`]), `all`, or a comma-separated list of [`Features::NAMES`].
+    /// `default` or `""` (= [`Features::KERNEL`]), `all`, `basic` (= [`Features::BASIC`]), or a
+    /// comma-separated list of [`Features::NAMES`]: the basic set plus those.
     pub fn parse(text: &str) -> Result<Features, String> {
-        let mut f = Features::KERNEL;
+        if text.trim().is_empty() {
+            return Ok(Features::KERNEL);
+        }
+        let mut f = Features::BASIC;
         for word in text.split(',').map(str::trim).filter(|w| !w.is_empty()) {
             match word {
-                "default" | "kernel" => {}
+                "default" | "kernel" => f = Features::KERNEL,
                 "all" => f = Features::ALL,
+                "basic" => f = Features::BASIC,
                 "roughdielectric" => f.rough_dielectric = true,
                 "roughplastic" => f.rough_plastic = true,
                 "textures" => f.textures = true,
                 "environment" => f.environment = true,
                 other => {
                     return Err(format!(
-                        "unknown generator feature '{other}': use default, all, or a list of {}",
+                        "unknown generator feature '{other}': use default (= all), basic, or a list of {}",
                         Features::NAMES.join(", ")
                     ));
                 }
@@ -71,13 +79,13 @@ impl Features {
         Ok(f)
     }
 
-    /// The inverse of [`Features::parse`]: `default`, `all` or the list of enabled features.
+    /// The inverse of [`Features::parse`]: `default`, `basic` or the list of enabled features.
     pub fn describe(&self) -> String {
         if *self == Features::KERNEL {
             return "default".into();
         }
-        if *self == Features::ALL {
-            return "all".into();
+        if *self == Features::BASIC {
+            return "basic".into();
         }
         let on = [self.rough_dielectric, self.rough_plastic, self.textures, self.environment];
         Features::NAMES.iter().zip(on).filter(|(_, on)| *on).map(|(n, _)| *n).collect::<Vec<_>>().join(",")

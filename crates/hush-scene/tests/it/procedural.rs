@@ -5,7 +5,9 @@ use std::collections::BTreeSet;
 use std::path::Path;
 
 use hush_scene::Scene;
-use hush_scene::procedural::{Features, GeneratedScene, GeneratorOptions, LightKind, MaterialClass, generate};
+use hush_scene::procedural::{
+    Features, GENERATOR_VERSION, GeneratedScene, GeneratorOptions, LightKind, MaterialClass, generate,
+};
 
 use crate::{scratch, shared};
 
@@ -44,14 +46,14 @@ fn check_round_trip(dir: &Path, g: &GeneratedScene) -> Scene {
 #[test]
 fn generated_scenes_load_back_as_generated() {
     let dir = scratch("procedural");
-    let options = GeneratorOptions { width: 40, height: 30, ..Default::default() };
+    let options = GeneratorOptions { features: Features::BASIC, width: 40, height: 30, ..Default::default() };
     let mut styles = BTreeSet::new();
     let mut classes = BTreeSet::new();
     for seed in 0..40u64 {
         let g = generate(seed, &options);
         let scene = check_round_trip(&dir.join(format!("s{seed}")), &g);
         assert_eq!((scene.film.width, scene.film.height), (40, 30));
-        // Only what the kernel renders today.
+        // Only the basic features.
         for m in &scene.meshes {
             assert!(
                 ["diffuse", "conductor", "roughconductor", "plastic", "dielectric", "thindielectric"]
@@ -65,7 +67,7 @@ fn generated_scenes_load_back_as_generated() {
         styles.insert(g.style);
         classes.extend(g.material_classes());
     }
-    // 40 seeds cover every style and every class but textures (off by default).
+    // 40 seeds cover every style and every class but textures (not basic).
     assert_eq!(styles.len(), 4, "{styles:?}");
     let expect: BTreeSet<MaterialClass> =
         MaterialClass::ALL.into_iter().filter(|c| *c != MaterialClass::Textured).collect();
@@ -100,7 +102,7 @@ fn same_seed_same_bytes_other_seed_other_scene() {
     assert_eq!(a.xml, b.xml);
     assert_eq!(a.assets, b.assets);
     assert_ne!(a.xml, c.xml);
-    assert!(a.xml.contains("generator 1, seed 7"), "{}", &a.xml[..200]);
+    assert!(a.xml.contains(&format!("generator {GENERATOR_VERSION}, seed 7")), "{}", &a.xml[..200]);
 }
 
 #[test]
