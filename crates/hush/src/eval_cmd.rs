@@ -73,6 +73,28 @@ impl Method for External {
     }
 }
 
+/// Official OIDN 2.5.1 in this process through the `oidn` crate (cargo feature `oidn`), with the settings of
+/// the Python runner, so its time has no process or interpreter overhead.
+#[cfg(feature = "oidn")]
+struct NativeOidn;
+
+#[cfg(feature = "oidn")]
+impl Method for NativeOidn {
+    fn name(&self) -> &str {
+        external::Baseline::Oidn.name()
+    }
+
+    fn run(&self, images: &ViewImages, timing_runs: usize) -> Result<Run> {
+        let (image, seconds) = hush_eval::oidn_native::denoise(
+            &images.color,
+            Some(&images.albedo),
+            Some(&images.normal),
+            timing_runs.max(1),
+        )?;
+        Ok(Run::Done(image, Some(seconds)))
+    }
+}
+
 /// Raw path tracing: the noisy input as it is.
 struct Noisy;
 
@@ -124,7 +146,10 @@ fn timed(runs: usize, denoise: impl Fn() -> Result<Image>) -> Result<(Image, f64
 pub const BASELINES: &[(&str, &str)] = &[
     (NOISY, "the noisy input (raw path tracing); always evaluated"),
     ("guided", "hush's hand-coded cross-bilateral filter guided by albedo and normal"),
-    ("oidn", "official Open Image Denoise 2.5.1 (Python venv of `cargo xtask baselines setup`)"),
+    (
+        "oidn",
+        "official Open Image Denoise 2.5.1 (Python venv of `cargo xtask baselines setup`, in process with the `oidn` feature)",
+    ),
     ("bm3d", "BM3D on the tonemapped image (Python venv of `cargo xtask baselines setup`)"),
 ];
 
@@ -134,6 +159,9 @@ fn baseline(name: &str) -> Result<Option<Box<dyn Method>>> {
     Ok(Some(match name {
         NOISY => return Ok(None),
         "guided" => Box::new(Guided),
+        #[cfg(feature = "oidn")]
+        "oidn" => Box::new(NativeOidn),
+        #[cfg(not(feature = "oidn"))]
         "oidn" => Box::new(External(external::Baseline::Oidn)),
         "bm3d" => Box::new(External(external::Baseline::Bm3d)),
         _ => {
