@@ -1,4 +1,4 @@
-//! The HTML report: escaping, inlining, and (behind `HUSH_CHROMIUM=1`, run by `cargo xtask eval --check-html`)
+//! The HTML report: escaping, inlining, and (ignored by default, run by `cargo xtask eval --check-html`)
 //! rendering in headless Chromium.
 
 use std::path::Path;
@@ -72,14 +72,11 @@ const INSTALL: &str = "apt-get install -y chromium";
 
 /// Renders report.html in headless Chromium: the page must load without console or network errors, its DOM
 /// must hold the report, and the screenshot must not be blank. Heavy (starts a browser) and needs Chromium,
-/// so it runs only with `HUSH_CHROMIUM=1` (`cargo xtask eval --check-html` sets it);
+/// so it is ignored by default: `cargo xtask eval --check-html` runs it (`--ignored`);
 /// `HUSH_CHROMIUM_HTML=<file>` checks that report instead of a synthetic one.
 #[test]
+#[ignore = "starts headless Chromium: run by `cargo xtask eval --check-html`"]
 fn html_renders_in_chromium() {
-    if std::env::var_os("HUSH_CHROMIUM").is_none() {
-        eprintln!("html_renders_in_chromium: set HUSH_CHROMIUM=1 (or run `cargo xtask eval --check-html`) to run it");
-        return;
-    }
     let chromium = ["chromium", "chromium-browser", "google-chrome"]
         .into_iter()
         .find(|c| Command::new(c).arg("--version").output().is_ok_and(|o| o.status.success()))
