@@ -294,6 +294,19 @@ impl Scene {
     /// Loads a scene file; the format is chosen by extension: `.xml` (Mitsuba 0.6, 2 or 3),
     /// `.obj` (Wavefront OBJ with its MTL materials), `.gltf`/`.glb` (glTF 2.0).
     pub fn load(path: &std::path::Path) -> Result<Scene, crate::SceneError> {
+        let mut scene = Scene::load_format(path)?;
+        let emits = scene.meshes.iter().any(|m| m.emission.is_some_and(|e| e.max_element() > 0.0));
+        if !emits && scene.environment.is_none() {
+            scene.warnings.push(format!(
+                "{}: nothing emits light (no area light, emissive material or environment): every image of it is \
+                 black; add an emitter",
+                path.display()
+            ));
+        }
+        Ok(scene)
+    }
+
+    fn load_format(path: &std::path::Path) -> Result<Scene, crate::SceneError> {
         match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
             Some("xml") => {
                 let text = std::fs::read_to_string(path)

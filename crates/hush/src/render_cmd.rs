@@ -11,6 +11,9 @@ use crate::cpu::cpu_seconds;
 /// Loads a scene and applies the command line's overrides.
 pub fn load_scene(path: &std::path::Path, view: &ViewOverrides) -> Result<Scene> {
     let mut scene = Scene::load(path)?;
+    for w in &scene.warnings {
+        eprintln!("warning: {w}");
+    }
     if let Some(w) = view.width {
         scene.film.width = w;
     }

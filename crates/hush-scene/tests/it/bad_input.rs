@@ -124,3 +124,19 @@ fn nan_vertex_in_obj_scene_is_an_error() {
     let err = Scene::load(&dir.join("bad.obj")).unwrap_err().to_string();
     assert!(err.contains("bad.obj") && err.contains("not finite"), "{err}");
 }
+
+/// A scene without any emitter loads (it is valid) but says that every image of it is black; one light is enough
+/// to silence the warning.
+#[test]
+fn a_scene_without_light_is_a_named_warning() {
+    let dir = scratch("unlit");
+    let dark = warnings(&dir, "");
+    assert_warned(&dark, &["nothing emits light", "add an emitter"]);
+    let lit = warnings(
+        &dir,
+        r#"<shape type="rectangle"><emitter type="area"><rgb name="radiance" value="1"/></emitter></shape>"#,
+    );
+    assert!(lit.iter().all(|w| !w.contains("nothing emits")), "{lit:?}");
+    let sky = warnings(&dir, r#"<emitter type="constant"/>"#);
+    assert!(sky.iter().all(|w| !w.contains("nothing emits")), "{sky:?}");
+}
