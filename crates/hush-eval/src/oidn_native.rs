@@ -10,8 +10,6 @@
 //! Same settings as the Python runner (`external`): filter `RT`, `hdr`, quality `balanced`, albedo and
 //! normal when both are given (weights `rt_hdr_alb_nrm`), else colour only (`rt_hdr`).
 
-use std::time::Instant;
-
 use hush_dataset::{Image, check_finite};
 
 use crate::{Error, Result};
@@ -40,15 +38,15 @@ pub fn denoise(color: &Image, albedo: Option<&Image>, normal: Option<&Image>, re
     }
     let mut output = vec![0.0f32; color.data.len()];
     filter.filter(&color.data, &mut output).map_err(oidn_err)?;
-    let mut times = Vec::with_capacity(repeats.max(1));
-    for _ in 0..repeats.max(1) {
-        let start = Instant::now();
-        filter.filter(&color.data, &mut output).map_err(oidn_err)?;
-        times.push(start.elapsed().as_secs_f64());
+    let mut failure = None;
+    let timing = crate::time_median(repeats, 0, || {
+        if let Err(e) = filter.filter(&color.data, &mut output) {
+            failure.get_or_insert(e);
+        }
+    });
+    if let Some(e) = failure {
+        return Err(oidn_err(e));
     }
     device.get_error().map_err(oidn_err)?;
-    times.sort_by(f64::total_cmp);
-    let n = times.len();
-    let median = if n % 2 == 1 { times[n / 2] } else { 0.5 * (times[n / 2 - 1] + times[n / 2]) };
-    Ok((Image { width: color.width, height: color.height, channels: 3, data: output }, median))
+    Ok((Image { width: color.width, height: color.height, channels: 3, data: output }, timing.median))
 }
