@@ -140,27 +140,8 @@ fn pipeline_runs_end_to_end() {
     let dir = scratch("pipeline");
     let ds = dir.join("ds");
     let run = dir.join("run");
-    let scene = cbox();
-    let dataset_args = [
-        "dataset",
-        s(&scene),
-        "--out",
-        s(&ds),
-        "--views",
-        "2",
-        "--test-views",
-        "1",
-        "--spp",
-        "1,2",
-        "--ref-spp",
-        "16",
-        "--aux-spp",
-        "4",
-        "--size",
-        "32",
-        "--seed",
-        "3",
-    ];
+    let dataset_args = cbox_dataset_args(&ds, "2", "1,2");
+    let dataset_args: Vec<&str> = dataset_args.iter().map(String::as_str).collect();
     expect_success(&dataset_args);
     let manifest = std::fs::read_to_string(ds.join("manifest.json")).unwrap();
     expect_success(&dataset_args);
@@ -492,30 +473,20 @@ fn killed_dataset_resumes_without_rerendering() {
     assert_eq!(what(manifest_of(&ds)), what(manifest_of(&sharded)), "shards render what one run renders");
 }
 
+/// `hush dataset` of the 32² Cornell box into `ds`: `views` views (the last a test view) at `spp`, references
+/// at 16 spp, features at 4.
+fn cbox_dataset_args(ds: &Path, views: &str, spp: &str) -> Vec<String> {
+    let scene = cbox();
+    let args = ["dataset", s(&scene), "--out", s(ds), "--views", views, "--test-views", "1", "--spp", spp];
+    let rest = ["--ref-spp", "16", "--aux-spp", "4", "--size", "32", "--seed", "3"];
+    args.iter().chain(&rest).map(|a| a.to_string()).collect()
+}
+
 /// A 32² Cornell box dataset for the training tests: 3 views (2 train, 1 test) at 2 and 4 spp.
 fn small_dataset(dir: &Path) -> PathBuf {
     let ds = dir.join("ds");
-    let scene = cbox();
-    expect_success(&[
-        "dataset",
-        s(&scene),
-        "--out",
-        s(&ds),
-        "--views",
-        "3",
-        "--test-views",
-        "1",
-        "--spp",
-        "2,4",
-        "--ref-spp",
-        "16",
-        "--aux-spp",
-        "4",
-        "--size",
-        "32",
-        "--seed",
-        "3",
-    ]);
+    let args = cbox_dataset_args(&ds, "3", "2,4");
+    expect_success(&args.iter().map(String::as_str).collect::<Vec<_>>());
     ds
 }
 
