@@ -40,6 +40,7 @@
 //! # }
 //! ```
 
+mod conv;
 mod denoise;
 mod input;
 pub mod loss;

@@ -1,0 +1,370 @@
+//! 3×3 convolutions (stride 1, padding 1) with bias and an optional ReLU, on the CPU, as blocked
+//! im2col + GEMM with the bias and the activation fused in.
+//!
+//! The output rows are cut into bands (a few rows of every output channel); bands run in parallel, each
+//! one im2col copy of its rows (`9·C` rows of contiguous row copies, about 1 MiB, so it stays in cache)
+//! and one single-threaded GEMM (`gemm` crate, what candle's matmul uses) `[Co × 9C] · [9C × band]`
+//! written straight into the output, whose bias and ReLU are then applied while the band is in cache.
+//! Every output element comes from exactly one GEMM call, so the result does not depend on the thread
+//! count. (Candle's own conv2d im2cols the whole image pixel by pixel, multiplies and then transposes
+//! the result into place: about 2–3× slower per layer here.)
+//!
+//! The weight gradient is the same GEMM the other way round, `[Co × band] · [band × 9C]`, summed over
+//! bands in a fixed order (deterministic again); the input gradient is the forward convolution of the
+//! output gradient with the kernel rotated by 180° and its in/out channels swapped.
+//!
+//! Elsewhere (CUDA, other dtypes) [`conv3x3`] uses candle's own `conv2d`.
+
+use candle_core::{CpuStorage, CustomOp2, CustomOp3, DType, Layout, Result, Shape, Tensor, bail};
+use rayon::prelude::*;
+
+/// `relu?(conv2d(x, weight, padding 1) + bias)` for NCHW `x`, OIHW `weight` (`Co × C × 3 × 3`) and `bias`
+/// (`Co`). Differentiable in all three.
+pub fn conv3x3(x: &Tensor, weight: &Tensor, bias: &Tensor, relu: bool) -> Result<Tensor> {
+    let (_, c, _, _) = x.dims4()?;
+    let (co, wc, kh, kw) = weight.dims4()?;
+    if (wc, kh, kw) != (c, 3, 3) || bias.dims1()? != co {
+        bail!(
+            "conv3x3: input {:?}, weight {:?}, bias {:?} do not fit a 3x3 convolution",
+            x.dims(),
+            weight.dims(),
+            bias.dims()
+        )
+    }
+    let all_f32 = [x, weight, bias].iter().all(|t| t.dtype() == DType::F32);
+    if x.device().is_cpu() && all_f32 {
+        x.contiguous()?.apply_op3(&weight.contiguous()?, &bias.contiguous()?, Conv3x3Op { relu })
+    } else {
+        let y = x.conv2d(weight, 1, 1, 1, 1)?.broadcast_add(&bias.reshape((1, co, 1, 1))?)?;
+        if relu { y.relu() } else { Ok(y) }
+    }
+}
+
+/// The fused forward op behind [`conv3x3`] on the CPU.
+struct Conv3x3Op {
+    relu: bool,
+}
+
+/// The weight gradient `dL/dW` from the input (first argument) and the gradient at the convolution's
+/// output before the activation (second argument).
+struct WeightGradOp;
+
+/// The contiguous f32 data of a CPU tensor argument.
+fn f32_data<'a>(storage: &'a CpuStorage, layout: &Layout, what: &str) -> Result<&'a [f32]> {
+    let CpuStorage::F32(data) = storage else { bail!("conv3x3: {what} must be f32") };
+    let Some((start, end)) = layout.contiguous_offsets() else { bail!("conv3x3: {what} must be contiguous") };
+    Ok(&data[start..end])
+}
+
+impl CustomOp3 for Conv3x3Op {
+    fn name(&self) -> &'static str {
+        "hush-conv3x3"
+    }
+
+    fn cpu_fwd(
+        &self,
+        s1: &CpuStorage,
+        l1: &Layout,
+        s2: &CpuStorage,
+        l2: &Layout,
+        s3: &CpuStorage,
+        l3: &Layout,
+    ) -> Result<(CpuStorage, Shape)> {
+        let (n, c, h, w) = l1.shape().dims4()?;
+        let co = l2.shape().dims()[0];
+        let geom = Geometry { c, h, w };
+        let x = f32_data(s1, l1, "input")?;
+        let weight = f32_data(s2, l2, "weight")?;
+        let bias = f32_data(s3, l3, "bias")?;
+        let y = forward(&geom, n, x, weight, bias, co, self.relu);
+        Ok((CpuStorage::F32(y), Shape::from((n, co, h, w))))
+    }
+
+    fn bwd(
+        &self,
+        x: &Tensor,
+        weight: &Tensor,
+        bias: &Tensor,
+        y: &Tensor,
+        grad: &Tensor,
+    ) -> Result<(Option<Tensor>, Option<Tensor>, Option<Tensor>)> {
+        // The gradient before the activation: ReLU passes it where the output is positive.
+        let grad = if self.relu { (grad * y.gt(0f32)?.to_dtype(DType::F32)?)? } else { grad.clone() };
+        let grad = grad.contiguous()?;
+        // d/dx: the convolution of the gradient with the kernel rotated by 180° and transposed to
+        // (in, out, 3, 3). Skipped when nothing upstream needs it (the network's input).
+        let grad_x = if x.track_op() {
+            let rev = Tensor::new(&[2u32, 1, 0], weight.device())?;
+            let w_rot = weight.detach().transpose(0, 1)?.contiguous()?.index_select(&rev, 2)?.index_select(&rev, 3)?;
+            let zero = Tensor::zeros(w_rot.dims()[0], DType::F32, weight.device())?;
+            Some(grad.apply_op3_no_bwd(&w_rot.contiguous()?, &zero, &Conv3x3Op { relu: false })?)
+        } else {
+            None
+        };
+        let grad_w = if weight.track_op() { Some(x.detach().apply_op2_no_bwd(&grad, &WeightGradOp)?) } else { None };
+        let grad_b = if bias.track_op() { Some(grad.sum((0, 2, 3))?) } else { None };
+        Ok((grad_x, grad_w, grad_b))
+    }
+}
+
+impl CustomOp2 for WeightGradOp {
+    fn name(&self) -> &'static str {
+        "hush-conv3x3-weight-grad"
+    }
+
+    fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
+        let (n, c, h, w) = l1.shape().dims4()?;
+        let (gn, co, gh, gw) = l2.shape().dims4()?;
+        if (gn, gh, gw) != (n, h, w) {
+            bail!("conv3x3: gradient {:?} does not fit input {:?}", l2.shape(), l1.shape())
+        }
+        let geom = Geometry { c, h, w };
+        let dw = weight_grad(&geom, n, f32_data(s1, l1, "input")?, f32_data(s2, l2, "gradient")?, co);
+        Ok((CpuStorage::F32(dw), Shape::from((co, c, 3, 3))))
+    }
+}
+
+/// Channels and size of one input image.
+struct Geometry {
+    c: usize,
+    h: usize,
+    w: usize,
+}
+
+impl Geometry {
+    /// Output rows per band: enough columns for an efficient GEMM, an im2col block of about 1 MiB
+    /// (`9·C` rows of f32) so that it stays in cache, and at least 4 bands per image where possible so
+    /// that two or more threads share small images.
+    fn band_rows(&self) -> usize {
+        let target_cols = ((1usize << 20) / (36 * self.c)).max(256);
+        (target_cols / self.w).clamp(1, self.h.div_ceil(4).max(1))
+    }
+
+    /// The bands `(image, first row, rows)` of a batch of `n` images.
+    fn bands(&self, n: usize) -> Vec<(usize, usize, usize)> {
+        let rows = self.band_rows();
+        (0..n).flat_map(|i| (0..self.h).step_by(rows).map(move |y0| (i, y0, rows.min(self.h - y0)))).collect()
+    }
+
+    /// The im2col block of the output rows `y0..y0+rows` of one image (`C × H × W`): `9·C` rows of
+    /// `rows·W` columns, row `ci·9 + ky·3 + kx` (the OIHW weight order) holding input pixel
+    /// `(y + ky − 1, x + kx − 1)` of channel `ci` for output pixel `(y, x)`, zero outside the image.
+    fn im2col(&self, image: &[f32], y0: usize, rows: usize, out: &mut Vec<f32>) {
+        let (h, w) = (self.h, self.w);
+        out.clear();
+        out.resize(9 * self.c * rows * w, 0.0);
+        for (r, block) in out.chunks_mut(rows * w).enumerate() {
+            let (ci, ky, kx) = (r / 9, r % 9 / 3, r % 3);
+            let channel = &image[ci * h * w..(ci + 1) * h * w];
+            for (dy, dst) in block.chunks_mut(w).enumerate() {
+                let Some(sy) = (y0 + dy + ky).checked_sub(1).filter(|&sy| sy < h) else { continue };
+                let src = &channel[sy * w..(sy + 1) * w];
+                match kx {
+                    0 => dst[1..].copy_from_slice(&src[..w - 1]),
+                    1 => dst.copy_from_slice(src),
+                    _ => dst[..w - 1].copy_from_slice(&src[1..]),
+                }
+            }
+        }
+    }
+}
+
+/// A raw pointer that bands may share because each writes disjoint elements.
+#[derive(Clone, Copy)]
+struct SharedMut(*mut f32);
+// SAFETY: used only to write disjoint elements from different threads (see `forward`).
+#[allow(unsafe_code)]
+unsafe impl Send for SharedMut {}
+#[allow(unsafe_code)]
+unsafe impl Sync for SharedMut {}
+
+impl SharedMut {
+    /// The pointer (a method, so that closures capture the whole `Send` wrapper, not its field).
+    fn get(self) -> *mut f32 {
+        self.0
+    }
+}
+
+/// `dst (m × n, row stride dst_rs) = a (m × k, row-major, row stride a_rs) · b (k × n)` with `b` given
+/// by its row and column strides; single-threaded.
+///
+/// # Safety
+/// Every index the strides reach must lie inside the allocations behind the pointers, and `dst` must not
+/// alias `a` or `b` or be written by another thread at the same elements.
+#[allow(unsafe_code, clippy::too_many_arguments)]
+unsafe fn sgemm(
+    (m, n, k): (usize, usize, usize),
+    dst: *mut f32,
+    dst_rs: usize,
+    accumulate: bool,
+    a: *const f32,
+    a_rs: usize,
+    b: *const f32,
+    (b_rs, b_cs): (usize, usize),
+) {
+    // SAFETY: forwarded to the caller.
+    unsafe {
+        gemm::gemm(
+            m,
+            n,
+            k,
+            dst,
+            1,
+            dst_rs as isize,
+            accumulate,
+            a,
+            1,
+            a_rs as isize,
+            b,
+            b_cs as isize,
+            b_rs as isize,
+            1.0,
+            1.0,
+            false,
+            false,
+            false,
+            gemm::Parallelism::None,
+        )
+    }
+}
+
+/// The forward convolution of a batch of `n` NCHW images: `n × co × H × W`, bias added, ReLU'd if asked.
+/// Each band's GEMM writes its rows of every output channel, then adds the bias and applies the
+/// activation while they are in cache.
+fn forward(geom: &Geometry, n: usize, x: &[f32], weight: &[f32], bias: &[f32], co: usize, relu: bool) -> Vec<f32> {
+    let (c, h, w) = (geom.c, geom.h, geom.w);
+    let mut y = vec![0f32; n * co * h * w];
+    let out = SharedMut(y.as_mut_ptr());
+    geom.bands(n).into_par_iter().for_each_init(Vec::new, |cols_buf, (i, y0, rows)| {
+        geom.im2col(&x[i * c * h * w..(i + 1) * c * h * w], y0, rows, cols_buf);
+        let cols = rows * w;
+        #[allow(unsafe_code)]
+        // SAFETY: the destination is image i's rows y0..y0+rows of every output channel (row stride H·W
+        // between channels), inside `y` and touched by no other band; `weight` is co × 9c and `cols_buf`
+        // 9c × cols, both row-major.
+        unsafe {
+            let dst = out.get().add(i * co * h * w + y0 * w);
+            sgemm((co, cols, 9 * c), dst, h * w, false, weight.as_ptr(), 9 * c, cols_buf.as_ptr(), (cols, 1));
+            for (o, &b) in bias.iter().enumerate() {
+                let band = std::slice::from_raw_parts_mut(dst.add(o * h * w), cols);
+                for v in band {
+                    *v += b;
+                    if relu {
+                        *v = v.max(0.0);
+                    }
+                }
+            }
+        }
+    });
+    y
+}
+
+/// Bands are summed in this many fixed groups (in parallel, then in order), so the weight gradient is the
+/// same whatever the thread count.
+const GRAD_GROUPS: usize = 8;
+
+/// `dL/dW` (`co × C × 3 × 3`) from the input batch and the output gradient `grad` (`n × co × H × W`, before
+/// the activation).
+fn weight_grad(geom: &Geometry, n: usize, x: &[f32], grad: &[f32], co: usize) -> Vec<f32> {
+    let (c, h, w) = (geom.c, geom.h, geom.w);
+    let bands = geom.bands(n);
+    let per_group = bands.len().div_ceil(GRAD_GROUPS);
+    let k = 9 * c;
+    let partials: Vec<Vec<f32>> = bands
+        .par_chunks(per_group)
+        .map(|group| {
+            let mut dw = vec![0f32; co * k];
+            let mut cols_buf = Vec::new();
+            for &(i, y0, rows) in group {
+                geom.im2col(&x[i * c * h * w..(i + 1) * c * h * w], y0, rows, &mut cols_buf);
+                let cols = rows * w;
+                #[allow(unsafe_code)]
+                // SAFETY: dw is co × 9c (row stride 9c), owned by this group; the gradient block is image
+                // i's rows y0..y0+rows of co channels (row stride H·W), inside `grad`; the im2col block
+                // (9c × cols, row-major) is read transposed (cols × 9c: row stride 1, column stride cols).
+                unsafe {
+                    let g = grad.as_ptr().add(i * co * h * w + y0 * w);
+                    sgemm((co, k, cols), dw.as_mut_ptr(), k, true, g, h * w, cols_buf.as_ptr(), (1, cols));
+                }
+            }
+            dw
+        })
+        .collect();
+    let mut total = vec![0f32; co * k];
+    for p in &partials {
+        for (t, v) in total.iter_mut().zip(p) {
+            *t += v;
+        }
+    }
+    total
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use candle_core::{Device, Var};
+
+    fn max_diff(a: &Tensor, b: &Tensor) -> Result<f32> {
+        (a - b)?.abs()?.max_all()?.to_scalar::<f32>()
+    }
+
+    /// Values and gradients (input, weight, bias) equal candle's conv2d + bias (+ ReLU), on shapes that
+    /// give one band and several bands per image.
+    #[test]
+    fn conv3x3_matches_candle_with_gradients() -> Result<()> {
+        let dev = Device::Cpu;
+        for (n, c, co, h, w, relu) in [(2, 3, 4, 5, 7, false), (1, 5, 6, 33, 9, true), (3, 2, 3, 1, 1, true)] {
+            let x = Var::from_tensor(&Tensor::randn(0f32, 1.0, (n, c, h, w), &dev)?)?;
+            let wt = Var::from_tensor(&Tensor::randn(0f32, 1.0, (co, c, 3, 3), &dev)?)?;
+            let b = Var::from_tensor(&Tensor::randn(0f32, 1.0, co, &dev)?)?;
+            let probe = Tensor::randn(0f32, 1.0, (n, co, h, w), &dev)?;
+            let ours = conv3x3(&x, &wt, &b, relu)?;
+            let theirs = x.conv2d(&wt, 1, 1, 1, 1)?.broadcast_add(&b.reshape((1, co, 1, 1))?)?;
+            let theirs = if relu { theirs.relu()? } else { theirs };
+            assert!(max_diff(&ours, &theirs)? < 1e-4, "values differ for {:?}", (n, c, co, h, w));
+            let g_ours = (ours * &probe)?.sum_all()?.backward()?;
+            let g_theirs = (theirs * &probe)?.sum_all()?.backward()?;
+            for v in [&x, &wt, &b] {
+                let (a, e) = (g_ours.get(v).expect("grad"), g_theirs.get(v).expect("grad"));
+                let d = max_diff(a, e)?;
+                assert!(d < 1e-3, "gradient of {:?} differs by {d} for {:?}", v.dims(), (n, c, co, h, w));
+            }
+        }
+        Ok(())
+    }
+
+    /// The output and the weight gradient are bit for bit the same on one thread and on three.
+    #[test]
+    fn results_do_not_depend_on_the_thread_count() -> Result<()> {
+        let dev = Device::Cpu;
+        let x = Tensor::randn(0f32, 1.0, (3, 7, 40, 24), &dev)?;
+        let wt = Tensor::randn(0f32, 1.0, (5, 7, 3, 3), &dev)?;
+        let b = Tensor::randn(0f32, 1.0, 5, &dev)?;
+        let grad = Tensor::randn(0f32, 1.0, (3, 5, 40, 24), &dev)?;
+        let run = |threads: usize| -> Result<(Vec<f32>, Vec<f32>)> {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("a thread pool");
+            pool.install(|| {
+                let y = conv3x3(&x, &wt, &b, true)?.flatten_all()?.to_vec1::<f32>()?;
+                let dw = x.apply_op2_no_bwd(&grad, &WeightGradOp)?.flatten_all()?.to_vec1::<f32>()?;
+                Ok((y, dw))
+            })
+        };
+        assert!(Geometry { c: 7, h: 40, w: 24 }.bands(3).len() > GRAD_GROUPS, "the test must span several groups");
+        assert_eq!(run(1)?, run(3)?);
+        Ok(())
+    }
+
+    /// Bands follow the rows: every row of every image belongs to exactly one band.
+    #[test]
+    fn bands_cover_every_row_once() {
+        for (c, h, w) in [(9, 512, 512), (160, 32, 32), (3, 7, 2), (64, 1, 300)] {
+            let geom = Geometry { c, h, w };
+            let bands = geom.bands(2);
+            for i in 0..2 {
+                let rows: usize = bands.iter().filter(|b| b.0 == i).map(|b| b.2).sum();
+                assert_eq!(rows, h, "{:?}", (c, h, w));
+            }
+            assert!(bands.windows(2).all(|p| p[0].0 < p[1].0 || p[0].1 + p[0].2 == p[1].1));
+        }
+    }
+}
