@@ -427,6 +427,14 @@ pub fn claims(sweep: &str, results: &[RunResult]) -> Vec<Claim> {
                 measured,
                 verdict,
             ));
+            out.push(g.better(
+                sweep,
+                "A CNN denoises better than Burger et al.'s patch MLP (§7.5.1, argued, not measured: \"the substantial \
+                 benefit of using Convolutional Neural Networks\")",
+                "oidn",
+                "mlp",
+                Metric::Psnr,
+            ));
             out
         }
         _ => Vec::new(),
