@@ -490,7 +490,7 @@ mod tests {
             .iter()
             .map(|&(epoch, tr, te)| Epoch { epoch, train_loss: tr, test_loss: Some(te), seconds: epoch as f64 })
             .collect();
-        RunResult { run, done: true, epochs, eval }
+        RunResult { run, done: true, epochs, eval, pictures: vec![] }
     }
 
     #[test]
