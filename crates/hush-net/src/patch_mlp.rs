@@ -247,58 +247,9 @@ impl PatchMlp {
             .collect()
     }
 
-    /// The patches of `x` (`N × C × H × W`) as rows, `(N · patches) × (patch² · C)`, each patch's pixels
-    /// row-major with their channels together; with the grid and the gather indices that [`Self::merge`]
-    /// scatters back with.
-    fn extract(&self, x: &Tensor) -> Result<(Tensor, Grid, Tensor)> {
-        let (n, c, h, w) = x.dims4()?;
-        let (p, s) = (self.cfg.patch, self.cfg.stride);
-        let grid = Grid::new(h, w, p, s);
-        let x = x.pad_with_same(2, grid.top, grid.height - h - grid.top)?;
-        let x = x.pad_with_same(3, grid.left, grid.width - w - grid.left)?;
-        let pixels = x.permute((0, 2, 3, 1))?.contiguous()?.reshape((n, grid.height * grid.width, c))?;
-        let ids = grid.indices(p, s);
-        let ids = Tensor::from_vec(ids, grid.rows * grid.cols * p * p, x.device())?;
-        let rows = pixels.index_select(&ids, 1)?.reshape((n * grid.rows * grid.cols, p * p * c))?;
-        Ok((rows, grid, ids))
-    }
-
-    /// The inverse of [`Self::extract`] for output rows `(N · patches) × (patch² · C)`: every patch weighted by
-    /// the Gaussian window, summed where patches overlap, divided by the summed weights, cropped back to
-    /// `h × w`. Returns `N × C × h × w`.
-    fn merge(&self, rows: &Tensor, grid: Grid, ids: &Tensor, h: usize, w: usize) -> Result<Tensor> {
-        let p2 = self.cfg.patch * self.cfg.patch;
-        let patches = grid.rows * grid.cols;
-        let (count, len) = rows.dims2()?;
-        let (n, c) = (count / patches, len / p2);
-        let weighted = rows.reshape((n, patches, p2, c))?.broadcast_mul(&self.window)?;
-        let weighted = weighted.reshape((n, patches * p2, c))?;
-        let pixels = grid.height * grid.width;
-        let sum = Tensor::zeros((n, pixels, c), rows.dtype(), rows.device())?.index_add(ids, &weighted, 1)?;
-        // The summed weights per pixel do not depend on the data: no gradient flows through them. Every
-        // padded pixel lies in at least one patch (stride ≤ patch) and the window is positive, so none is 0.
-        let ones = self.window.reshape((1, p2, 1))?.repeat((1, patches, 1))?;
-        let norm = Tensor::zeros((1, pixels, 1), rows.dtype(), rows.device())?.index_add(ids, &ones, 1)?;
-        let image = sum.broadcast_div(&norm.detach())?;
-        let image = image.reshape((n, grid.height, grid.width, c))?.permute((0, 3, 1, 2))?;
-        image.narrow(2, grid.top, h)?.narrow(3, grid.left, w)?.contiguous()
-    }
-}
-
-impl Module for PatchMlp {
-    /// `N × in_channels × H × W` to `N × out_channels × H × W`, for any `H, W ≥ 1`.
-    fn forward(&self, x: &Tensor) -> Result<Tensor> {
-        let (_, c, h, w) = match x.dims4() {
-            Ok(d) => d,
-            Err(_) => bail!("PatchMlp input must be NCHW, got shape {:?}", x.dims()),
-        };
-        if c != self.cfg.in_channels {
-            bail!("PatchMlp input has {c} channels but the network was built for {}", self.cfg.in_channels)
-        }
-        if h == 0 || w == 0 {
-            bail!("PatchMlp input must not be empty, got shape {:?}", x.dims())
-        }
-        let (mut y, grid, ids) = self.extract(x)?;
+    /// The MLP on patch rows `(N · patches) × (patch² · in_channels)`.
+    fn mlp(&self, rows: &Tensor) -> Result<Tensor> {
+        let mut y = rows.clone();
         let last = self.layers.len() - 1;
         for (i, layer) in self.layers.iter().enumerate() {
             y = layer.forward(&y)?;
@@ -309,7 +260,77 @@ impl Module for PatchMlp {
                 };
             }
         }
-        self.merge(&y, grid, &ids, h, w)
+        Ok(y)
+    }
+
+    /// [`Module::forward`] with the patches run through the MLP `chunk` at a time per image, which bounds the
+    /// memory of large images (the gathered rows and the hidden activations) without changing the result.
+    fn forward_chunked(&self, x: &Tensor, chunk: usize) -> Result<Tensor> {
+        let (n, c, h, w) = match x.dims4() {
+            Ok(d) => d,
+            Err(_) => bail!("PatchMlp input must be NCHW, got shape {:?}", x.dims()),
+        };
+        if c != self.cfg.in_channels {
+            bail!("PatchMlp input has {c} channels but the network was built for {}", self.cfg.in_channels)
+        }
+        if h == 0 || w == 0 {
+            bail!("PatchMlp input must not be empty, got shape {:?}", x.dims())
+        }
+        let (p, s) = (self.cfg.patch, self.cfg.stride);
+        let p2 = p * p;
+        let grid = Grid::new(h, w, p, s);
+        let x = x.pad_with_same(2, grid.top, grid.height - h - grid.top)?;
+        let x = x.pad_with_same(3, grid.left, grid.width - w - grid.left)?;
+        // Pixels as rows of channels, so that a patch is `patch²` gathered rows: `N × (H · W) × C`.
+        let pixels = x.permute((0, 2, 3, 1))?.contiguous()?.reshape((n, grid.height * grid.width, c))?;
+        let patches = grid.rows * grid.cols;
+        let ids = Tensor::from_vec(grid.indices(p, s), patches * p2, x.device())?;
+        let mut sum = Tensor::zeros((n, grid.height * grid.width, self.cfg.out_channels), x.dtype(), x.device())?;
+        for start in (0..patches).step_by(chunk.max(1)) {
+            let m = chunk.max(1).min(patches - start);
+            let ids = ids.narrow(0, start * p2, m * p2)?;
+            let rows = pixels.index_select(&ids, 1)?.reshape((n * m, p2 * c))?;
+            sum = self.accumulate(&sum, &self.mlp(&rows)?, &ids)?;
+        }
+        self.normalize(&sum, grid, &ids, h, w)
+    }
+
+    /// Adds output rows `(N · m) × (patch² · C)` of `m` patches, each weighted by the Gaussian window, at their
+    /// pixels `ids` (`m · patch²`) to `sum` (`N × pixels × C`).
+    fn accumulate(&self, sum: &Tensor, rows: &Tensor, ids: &Tensor) -> Result<Tensor> {
+        let p2 = self.cfg.patch * self.cfg.patch;
+        let (n, _, c) = sum.dims3()?;
+        let m = ids.dims1()? / p2;
+        let weighted = rows.reshape((n, m, p2, c))?.broadcast_mul(&self.window)?.reshape((n, m * p2, c))?;
+        sum.index_add(ids, &weighted, 1)
+    }
+
+    /// The weighted sums divided by the summed weights of every patch (`ids` of all of them), cropped back to
+    /// `h × w`: `N × C × h × w`.
+    fn normalize(&self, sum: &Tensor, grid: Grid, ids: &Tensor, h: usize, w: usize) -> Result<Tensor> {
+        let (n, pixels, c) = sum.dims3()?;
+        let p2 = self.cfg.patch * self.cfg.patch;
+        let patches = ids.dims1()? / p2;
+        // The summed weights do not depend on the data: no gradient flows through them. Every padded pixel lies
+        // in at least one patch (stride ≤ patch) and the window is positive, so none is 0.
+        let ones = self.window.reshape((1, p2, 1))?.repeat((1, patches, 1))?;
+        let norm = Tensor::zeros((1, pixels, 1), sum.dtype(), sum.device())?.index_add(ids, &ones, 1)?;
+        let image = sum.broadcast_div(&norm.detach())?;
+        let image = image.reshape((n, grid.height, grid.width, c))?.permute((0, 3, 1, 2))?;
+        image.narrow(2, grid.top, h)?.narrow(3, grid.left, w)?.contiguous()
+    }
+}
+
+/// Patches per MLP call and image in [`PatchMlp::forward`]: 4096 rows of 17²·12 inputs are 57 MB; a training
+/// batch of 64² crops (289 patches each) is one call.
+const CHUNK_PATCHES: usize = 4096;
+
+impl Module for PatchMlp {
+    /// `N × in_channels × H × W` to `N × out_channels × H × W`, for any `H, W ≥ 1`: pad by replicating the
+    /// border so that the patch grid covers the image, gather the patches, run the MLP, weight each output
+    /// patch by the Gaussian window, sum where patches overlap, divide by the summed weights, crop back.
+    fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        self.forward_chunked(x, CHUNK_PATCHES)
     }
 }
 
@@ -379,7 +400,9 @@ mod tests {
             ],
             0,
         )?;
-        let merged = net.merge(&rows, grid, &ids, h, w)?.i((0, 1, 5))?.to_vec1::<f32>()?;
+        let sum = Tensor::zeros((1, h * w, 3), DType::F32, &Device::Cpu)?;
+        let merged = net.normalize(&net.accumulate(&sum, &rows, &ids)?, grid, &ids, h, w)?;
+        let merged = merged.i((0, 1, 5))?.to_vec1::<f32>()?;
         let s2 = 2.0 * cfg.sigma * cfg.sigma;
         for (x, &got) in merged.iter().enumerate() {
             let want = match x {
@@ -401,8 +424,12 @@ mod tests {
         let cfg = config(4, 17, 3, vec![8]);
         let net = PatchMlp::new(VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu), &cfg)?;
         for (h, w) in [(1, 1), (7, 19), (17, 17), (18, 31), (33, 20), (64, 64)] {
-            let y = net.forward(&ramp((2, 4, h, w), DType::F32)?)?;
+            let x = ramp((2, 4, h, w), DType::F32)?;
+            let y = net.forward(&x)?;
             assert_eq!(y.dims(), &[2, 3, h, w]);
+            // Running the patches a few at a time changes only the order of the sums.
+            let d = (net.forward_chunked(&x, 5)? - &y)?.abs()?.flatten_all()?.max(0)?.to_scalar::<f32>()?;
+            assert!(d < 1e-5, "{h}x{w}: chunked forward differs by {d}");
         }
         assert!(net.forward(&ramp((1, 3, 8, 8), DType::F32)?).unwrap_err().to_string().contains("4"));
         Ok(())
@@ -418,8 +445,9 @@ mod tests {
         let net = PatchMlp::new(VarBuilder::from_varmap(&varmap, DType::F64, &dev), &cfg)?;
         let x = Var::from_tensor(&ramp((1, 2, 7, 6), DType::F64)?)?;
         let probe = ramp((1, 3, 7, 6), DType::F64)?.sin()?;
-        let loss = || -> Result<f64> { (net.forward(&x)? * &probe)?.sum_all()?.to_scalar::<f64>() };
-        let grads = (net.forward(&x)? * &probe)?.sum_all()?.backward()?;
+        // Three patches per MLP call: the gradient flows through several gathers and scatter-adds.
+        let loss = || -> Result<f64> { (net.forward_chunked(&x, 3)? * &probe)?.sum_all()?.to_scalar::<f64>() };
+        let grads = (net.forward_chunked(&x, 3)? * &probe)?.sum_all()?.backward()?;
         let eps = 1e-6;
         // Central differences in f64 are accurate to about eps² · f''' + ulp / eps ≈ 1e-10 here.
         let tolerance = 1e-7;
