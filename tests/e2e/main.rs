@@ -568,6 +568,55 @@ fn train_resumes_exactly_after_sigkill() {
     );
 }
 
+/// The patch MLP through the whole pipeline: `hush train --arch patch_mlp` writes a model that records it,
+/// `--resume` continues it without repeating the architecture, `hush denoise` and `hush eval` run it.
+#[test]
+fn patch_mlp_trains_denoises_and_evaluates() {
+    let dir = scratch("patch_mlp");
+    let ds = small_dataset(&dir);
+    let run = dir.join("run");
+    let train = ["train", "--dataset", s(&ds), "--out", s(&run), "--arch", "patch_mlp", "--width", "0.01"];
+    expect_success(&[&train[..], &["--steps", "2", "--batch", "2", "--crop", "32", "--eval-every", "1"]].concat());
+    let err = expect_error(&["train", "--dataset", s(&ds), "--out", s(&dir.join("x")), "--arch", "mlp2"]);
+    assert!(err.contains("unknown --arch 'mlp2'") && err.contains("patch_mlp"), "{err}");
+    expect_success(&["train", "--resume", s(&run), "--steps", "3"]);
+    assert_eq!(loss_columns(&run).len(), 4, "header and three steps");
+    let cfg: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("config.json")).unwrap()).unwrap();
+    let net = &cfg["train"]["net"];
+    assert_eq!(
+        (net["kind"].as_str(), net["patch"].as_u64(), net["stride"].as_u64()),
+        (Some("patch_mlp"), Some(17), Some(3))
+    );
+    assert_eq!(net["hidden"], serde_json::json!([20, 20, 20, 20]), "⌊2047 × 0.01⌋ units in each of 4 layers");
+
+    let model = run.join("model.safetensors");
+    let out = dir.join("denoised.exr");
+    let color = ds.join("cbox_v000_000002.hdr.exr");
+    let (albedo, normal) = (ds.join("cbox_v000_ref.alb.exr"), ds.join("cbox_v000_ref.nrm.exr"));
+    expect_success(&[
+        "denoise",
+        "--model",
+        s(&model),
+        "--color",
+        s(&color),
+        "--albedo",
+        s(&albedo),
+        "--normal",
+        s(&normal),
+        "--out",
+        s(&out),
+    ]);
+    let denoised = hush_dataset::read_rgb(&out).unwrap();
+    assert_eq!((denoised.width, denoised.height, denoised.count_non_finite()), (32, 32, 0));
+
+    let report = dir.join("report");
+    expect_success(&["eval", "--dataset", s(&ds), "--model", s(&model), "--out", s(&report), "--timing-runs", "1"]);
+    let md = std::fs::read_to_string(report.join("report.md")).unwrap();
+    assert!(md.contains("patch_mlp (17×17 patches, stride 3, hidden 20,20,20,20, tanh"), "{md}");
+    assert!(md.contains("run/model"), "{md}");
+}
+
 /// Options from a TOML file (the thesis's feature-set name, SGD, a schedule, epochs), overridden by
 /// flags, end up typed in config.json; each epoch has a metrics row, every 2nd a test loss, a
 /// checkpoint and the loss plot; an unknown key is a clear error.

@@ -4,6 +4,9 @@
 //!   autoencoder without skips ([`UNetKind`]), with OIDN's layer names as weight keys (`enc_conv0.weight`,
 //!   ..., `dec_conv0.bias`) and a width multiplier (the thesis' M1/M2 capacities). NCHW f32.
 //!   [`init_weights`] gives a reproducible initialization (candle's CPU generator cannot be seeded).
+//! * [`PatchMlp`] / [`PatchMlpConfig`]: Burger et al.'s plain MLP on overlapping 17×17 patches (stride 3),
+//!   merged with a Gaussian window (thesis §7.5.1), a baseline on NCHW images of any size.
+//! * [`Net`] / [`NetConfig`]: either network, as weight files record it and as training and inference build it.
 //! * [`loss`]: L1, MSE, SSIM, MS-SSIM and the thesis' mix 0.16·L1 + 0.84·(1 − MS-SSIM); `ssim` doubles as
 //!   the evaluation metric.
 //! * [`transfer`]: autoexposure and the PU / log / sRGB transfer functions, on values and tensors.
@@ -44,6 +47,8 @@ mod conv;
 mod denoise;
 mod input;
 pub mod loss;
+mod net;
+mod patch_mlp;
 pub mod transfer;
 mod tza;
 mod unet;
@@ -52,6 +57,8 @@ mod weights;
 pub use denoise::denoise;
 pub use input::{Feature, Features, build_inference_input, build_input, finish_color, prepare_color};
 pub use loss::Loss;
+pub use net::{DenoiseNet, Net, NetConfig, PATCH_MLP_KIND};
+pub use patch_mlp::{Activation, BURGER_HIDDEN, BURGER_PATCH, BURGER_STRIDE, PatchMlp, PatchMlpConfig};
 pub use tza::{TzaTensor, export_tza, infer_config, load_tza, oidn_features, parse_tza, write_tza};
 pub use unet::{
     ALIGNMENT, ConvShape, THESIS_M1_WIDTH, THESIS_M2_WIDTH, UNet, UNetConfig, UNetKind, crop, hwc_to_nchw,

@@ -267,13 +267,13 @@ pub fn load_tza(bytes: &[u8], features: Option<Features>, device: &Device) -> Re
         Some(f) => f,
         None => oidn_features(net.in_channels)?,
     };
-    let info = ModelInfo { net, features, transfer: Transfer::Pu };
+    let info = ModelInfo { net: net.clone().into(), features, transfer: Transfer::Pu };
     info.validate()?;
     let map = tensors
         .into_iter()
         .map(|t| Ok((t.name, Tensor::from_vec(t.values, t.dims, device)?)))
         .collect::<Result<std::collections::HashMap<_, _>>>()?;
-    let unet = UNet::new(VarBuilder::from_tensors(map, DType::F32, device), &info.net)?;
+    let unet = UNet::new(VarBuilder::from_tensors(map, DType::F32, device), &net)?;
     Ok((unet, info))
 }
 

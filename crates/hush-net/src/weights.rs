@@ -10,8 +10,8 @@ use safetensors::tensor::{Dtype, SafeTensors, View};
 use serde::{Deserialize, Serialize};
 
 use crate::input::Features;
+use crate::net::{Net, NetConfig};
 use crate::transfer::Transfer;
-use crate::unet::{UNet, UNetConfig};
 
 /// The safetensors metadata key holding [`ModelInfo`] as JSON.
 pub const METADATA_KEY: &str = "hush.config";
@@ -19,7 +19,8 @@ pub const METADATA_KEY: &str = "hush.config";
 /// Everything needed to rebuild a network and feed it: stored beside the weights.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ModelInfo {
-    pub net: UNetConfig,
+    /// The network; files from before the patch MLP hold a bare U-Net configuration, which reads as one.
+    pub net: NetConfig,
     pub features: Features,
     /// Transfer function applied to the color and the target.
     pub transfer: Transfer,
@@ -29,10 +30,10 @@ impl ModelInfo {
     /// Fails unless the network's input channels match the features.
     pub fn validate(&self) -> Result<()> {
         self.net.validate()?;
-        if self.net.in_channels != self.features.in_channels() {
+        if self.net.in_channels() != self.features.in_channels() {
             bail!(
                 "network has {} input channels but features {} make {}",
-                self.net.in_channels,
+                self.net.in_channels(),
                 self.features,
                 self.features.in_channels()
             )
@@ -126,7 +127,7 @@ pub fn read_metadata(bytes: &[u8]) -> Result<Option<ModelInfo>> {
 }
 
 /// Builds the network a self-describing weight file describes, with its weights, on `device` (f32).
-pub fn load_model(bytes: &[u8], device: &Device) -> Result<(UNet, ModelInfo)> {
+pub fn load_model(bytes: &[u8], device: &Device) -> Result<(Net, ModelInfo)> {
     let Some(info) = read_metadata(bytes)? else {
         bail!("load_model: the weight file has no {METADATA_KEY} metadata; it was not written by hush")
     };
@@ -135,6 +136,6 @@ pub fn load_model(bytes: &[u8], device: &Device) -> Result<(UNet, ModelInfo)> {
     let tensors: HashMap<String, Tensor> =
         tensors.into_iter().map(|(k, v)| Ok((k, v.to_dtype(DType::F32)?))).collect::<Result<_>>()?;
     let vb = VarBuilder::from_tensors(tensors, DType::F32, device);
-    let net = UNet::new(vb, &info.net)?;
+    let net = Net::new(vb, &info.net)?;
     Ok((net, info))
 }

@@ -82,15 +82,11 @@ pub(crate) fn load_checkpoint(
     let (stored, now) = (state.config.model_info(), cfg.model_info());
     if stored != now {
         return Err(TrainError::Config(format!(
-            "cannot resume: the checkpoint was trained with the {} network (width {}, {} input channels) on \
-             features {}, but this run asks for the {} network (width {}, {} input channels) on features {}",
-            stored.net.kind.name(),
-            stored.net.width,
-            stored.net.in_channels,
+            "cannot resume: the checkpoint was trained with the network {} on features {}, but this run asks for \
+             the network {} on features {}",
+            stored.net.describe(),
             stored.features,
-            now.net.kind.name(),
-            now.net.width,
-            now.net.in_channels,
+            now.net.describe(),
             now.features
         )));
     }

@@ -1,7 +1,7 @@
 //! [`TrainConfig`]: everything that determines a training run.
 
 use hush_net::transfer::Transfer;
-use hush_net::{ALIGNMENT, Features, Loss, ModelInfo, UNetConfig};
+use hush_net::{ALIGNMENT, Features, Loss, ModelInfo, NetConfig, UNetConfig};
 use serde::{Deserialize, Serialize};
 
 use crate::{Augment, OptimizerConfig, Result, Schedule, TrainError};
@@ -14,7 +14,8 @@ pub struct TrainConfig {
     pub features: Features,
     /// The transfer function the samples' color and target went through (recorded in the weights).
     pub transfer: Transfer,
-    pub net: UNetConfig,
+    /// A U-Net or the patch MLP; run configurations from before the patch MLP read as U-Nets.
+    pub net: NetConfig,
     pub loss: Loss,
     pub optimizer: OptimizerConfig,
     /// The base learning rate the schedule scales (the thesis: 1e-4, constant; for one-cycle the maximum).
@@ -42,7 +43,7 @@ impl TrainConfig {
     /// The thesis' recipe for `features` at full OIDN width: MIX loss, Adam at a constant 1e-4, 256² crops,
     /// PU transfer, flips. `steps`, `batch` and `eval_every` are placeholders to adjust to the machine.
     pub fn thesis(features: Features) -> Self {
-        let net = UNetConfig::oidn(features.in_channels());
+        let net = UNetConfig::oidn(features.in_channels()).into();
         TrainConfig {
             features,
             transfer: Transfer::Pu,
@@ -76,8 +77,8 @@ impl TrainConfig {
     pub fn validate(&self) -> Result<()> {
         let bad = |m: String| Err(TrainError::Config(m));
         self.model_info().validate().map_err(|e| TrainError::Config(e.to_string()))?;
-        if self.net.out_channels != 3 {
-            return bad(format!("the network must have 3 output channels (RGB), not {}", self.net.out_channels));
+        if self.net.out_channels() != 3 {
+            return bad(format!("the network must have 3 output channels (RGB), not {}", self.net.out_channels()));
         }
         if !(self.lr.is_finite() && self.lr > 0.0) {
             return bad(format!("learning rate must be finite and > 0, got {}", self.lr));

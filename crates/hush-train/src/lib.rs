@@ -25,7 +25,7 @@
 //! let samples = vec![TrainSample { input, target }];
 //!
 //! let mut cfg = TrainConfig::thesis(Features::default());
-//! cfg.net = UNetConfig { kind: UNetKind::Unet, in_channels: 3, out_channels: 3, width: 0.25 };
+//! cfg.net = UNetConfig { kind: UNetKind::Unet, in_channels: 3, out_channels: 3, width: 0.25 }.into();
 //! (cfg.steps, cfg.batch, cfg.crop) = (2, 1, 16);
 //! let trained = train(&cfg, &samples, &[], &candle_core::Device::Cpu, None, |report| {
 //!     println!("step {} loss {:.4}", report.row.step, report.row.loss);

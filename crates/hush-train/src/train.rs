@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use candle_core::{DType, Device, Module, Tensor};
 use candle_nn::{VarBuilder, VarMap};
-use hush_net::{ALIGNMENT, UNet, hwc_to_nchw, init_weights, save_weights};
+use hush_net::{ALIGNMENT, Net, hwc_to_nchw, init_weights, save_weights};
 use serde::{Deserialize, Serialize};
 
 use crate::checkpoint::{TrainState, load_checkpoint, save_checkpoint};
@@ -90,8 +90,8 @@ struct Batch {
     target: Vec<f32>,
 }
 
-/// Trains a U-Net on `train` samples, measuring the loss on `test` samples (may be empty) every
-/// `eval_every` epochs.
+/// Trains a network (a U-Net or the patch MLP) on `train` samples, measuring the loss on `test` samples (may be
+/// empty) every `eval_every` epochs.
 ///
 /// Every step draws `batch` random `crop`² windows (see [`TrainConfig`]), computes the loss and updates the
 /// weights with the configured optimizer at the schedule's learning rate for the step's epoch. Batches
@@ -119,7 +119,7 @@ pub fn train(
     let epochs = cfg.steps.div_ceil(epoch_steps);
 
     let varmap = VarMap::new();
-    let net = UNet::new(VarBuilder::from_varmap(&varmap, DType::F32, device), &cfg.net)?;
+    let net = Net::new(VarBuilder::from_varmap(&varmap, DType::F32, device), &cfg.net)?;
     let mut opt = Optimizer::for_varmap(cfg.optimizer.clone(), &varmap)?;
     let mut best = None;
     let first_step = match resume {
@@ -183,7 +183,7 @@ pub fn train(
             epoch_wait += waited.elapsed();
             let epoch = (step - 1) / epoch_steps + 1;
             let lr = cfg.schedule.lr(cfg.lr, epoch, epochs);
-            let (n, c, s) = (cfg.batch, cfg.net.in_channels, cfg.crop);
+            let (n, c, s) = (cfg.batch, cfg.net.in_channels(), cfg.crop);
             let input = Tensor::from_vec(batch.input, (n, c, s, s), device)?;
             let target = Tensor::from_vec(batch.target, (n, 3, s, s), device)?;
             let output = net.forward(&input)?;
@@ -291,7 +291,7 @@ pub fn train(
 }
 
 /// The mean loss over whole test images (each cropped centrally to a multiple of 16 per side).
-fn test_loss(net: &UNet, cfg: &TrainConfig, test: &[TrainSample], device: &Device) -> Result<f64> {
+fn test_loss(net: &Net, cfg: &TrainConfig, test: &[TrainSample], device: &Device) -> Result<f64> {
     let mut sum = 0.0;
     for s in test {
         let (w, h) = (s.input.width, s.input.height);
@@ -312,7 +312,7 @@ fn check_samples(cfg: &TrainConfig, samples: &[TrainSample], what_set: &str) -> 
     if samples.is_empty() && what_set == "training" {
         return Err(TrainError::Data("no training samples".into()));
     }
-    let want = cfg.net.in_channels;
+    let want = cfg.net.in_channels();
     let min = if what_set == "training" { cfg.crop } else { ALIGNMENT };
     for (i, s) in samples.iter().enumerate() {
         let (inp, tgt) = (&s.input, &s.target);

@@ -13,7 +13,7 @@ use anyhow::{Result, bail};
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{VarBuilder, VarMap};
 use clap::{Args, Subcommand};
-use hush_net::{Features, Loss, ModelInfo, UNet, UNetConfig, UNetKind, init_weights, transfer::Transfer};
+use hush_net::{Features, Loss, ModelInfo, Net, UNetConfig, UNetKind, init_weights, transfer::Transfer};
 use hush_train::{Optimizer, OptimizerConfig};
 
 use crate::cpu::{cpu_seconds, peak_rss_bytes};
@@ -67,7 +67,7 @@ impl NetArgs {
         };
         let features = Features::parse(&self.features)?;
         let net = UNetConfig { kind, in_channels: features.in_channels(), out_channels: 3, width: self.width };
-        let info = ModelInfo { net, features, transfer: Transfer::Pu };
+        let info = ModelInfo { net: net.into(), features, transfer: Transfer::Pu };
         info.validate()?;
         if self.size == 0 || self.runs == 0 || self.batch == 0 {
             bail!("--size, --runs and --batch must be at least 1")
@@ -122,9 +122,9 @@ pub fn run(args: BenchArgs) -> Result<()> {
     Ok(())
 }
 
-fn new_net(info: &ModelInfo, device: &Device) -> Result<(VarMap, UNet)> {
+fn new_net(info: &ModelInfo, device: &Device) -> Result<(VarMap, Net)> {
     let varmap = VarMap::new();
-    let net = UNet::new(VarBuilder::from_varmap(&varmap, DType::F32, device), &info.net)?;
+    let net = Net::new(VarBuilder::from_varmap(&varmap, DType::F32, device), &info.net)?;
     init_weights(&varmap, 1)?;
     Ok((varmap, net))
 }
@@ -143,7 +143,8 @@ fn inference(a: &NetArgs, device: &Device) -> Result<serde_json::Value> {
     let flop = 2.0 * info.net.multiply_adds(padded, padded) as f64;
     Ok(serde_json::json!({
         "what": "inference",
-        "kind": info.net.kind.name(), "width": info.net.width, "in_channels": info.net.in_channels,
+        "kind": info.net.kind_name(), "width": info.net.as_unet().map(|u| u.width),
+        "in_channels": info.net.in_channels(),
         "size": a.size, "device": format!("{device:?}"),
         "seconds": seconds, "cpu_seconds": cpu, "runs_seconds": all,
         "gflop": flop / 1e9, "gflops": flop / 1e9 / seconds,
@@ -155,7 +156,7 @@ fn train_step(a: &NetArgs, device: &Device) -> Result<serde_json::Value> {
     let info = a.info()?;
     let (varmap, net) = new_net(&info, device)?;
     let mut opt = Optimizer::for_varmap(OptimizerConfig::adam(), &varmap)?;
-    let c = info.net.in_channels;
+    let c = info.net.in_channels();
     let shape = (a.batch, c, a.size, a.size);
     let x = Tensor::from_vec(synthetic(a.size, a.batch * c, 7), shape, device)?;
     let y = Tensor::from_vec(synthetic(a.size, a.batch * 3, 8), (a.batch, 3, a.size, a.size), device)?;
@@ -172,7 +173,7 @@ fn train_step(a: &NetArgs, device: &Device) -> Result<serde_json::Value> {
     let flop = 3.0 * 2.0 * a.batch as f64 * info.net.multiply_adds(padded, padded) as f64;
     Ok(serde_json::json!({
         "what": "train-step",
-        "kind": info.net.kind.name(), "width": info.net.width, "in_channels": c,
+        "kind": info.net.kind_name(), "width": info.net.as_unet().map(|u| u.width), "in_channels": c,
         "batch": a.batch, "size": a.size, "loss": loss.name(), "optimizer": "adam", "device": format!("{device:?}"),
         "seconds": seconds, "cpu_seconds": cpu, "runs_seconds": all,
         "flop_model": "3 forward passes of 3x3-convolution multiply-adds (forward, input gradient, weight gradient), \

@@ -5,7 +5,7 @@ use std::path::Path;
 use anyhow::{Context, Result, bail};
 use candle_core::Device;
 use hush_dataset::Image;
-use hush_net::{Feature, ModelInfo, UNet, load_model, load_tza};
+use hush_net::{Feature, ModelInfo, Net, load_model, load_tza};
 
 /// The auxiliary image of a dataset view for one feature.
 pub fn aux_of(view: &hush_dataset::ViewImages, f: Feature) -> &Image {
@@ -28,19 +28,24 @@ pub fn device() -> Result<Device> {
 }
 
 pub struct Denoiser {
-    net: UNet,
+    net: Net,
     pub info: ModelInfo,
 }
 
 impl Denoiser {
-    /// Loads a hush model (`.safetensors`, self-describing) or OIDN weights (`.tza`, e.g. OIDN's official
-    /// `rt_hdr_alb_nrm.tza`). A TZA file carries no feature list: 3 input channels mean color only, 6 color +
-    /// albedo, 9 color + albedo + normal; the network kind comes from its tensor names and shapes.
+    /// Loads a hush model (`.safetensors`, self-describing: a U-Net or the patch MLP) or OIDN weights (`.tza`,
+    /// e.g. OIDN's official `rt_hdr_alb_nrm.tza`). A TZA file carries no feature list: 3 input channels mean
+    /// color only, 6 color + albedo, 9 color + albedo + normal; the network kind comes from its tensor names and
+    /// shapes.
     pub fn load(path: &Path) -> Result<Denoiser> {
         let bytes = std::fs::read(path).with_context(|| format!("reading model {}", path.display()))?;
         let device = device()?;
         let is_tza = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("tza"));
-        let loaded = if is_tza { load_tza(&bytes, None, &device) } else { load_model(&bytes, &device) };
+        let loaded = if is_tza {
+            load_tza(&bytes, None, &device).map(|(net, info)| (Net::from(net), info))
+        } else {
+            load_model(&bytes, &device)
+        };
         let (net, info) = loaded.with_context(|| format!("loading model {}", path.display()))?;
         Ok(Denoiser { net, info })
     }
@@ -51,7 +56,7 @@ impl Denoiser {
     }
 
     /// Denoises linear HDR `color` with the auxiliary images in the order of [`Self::features`]:
-    /// OIDN's runtime pipeline (`hush_net::denoise`: autoexposure of the input, transfer, U-Net, inverse
+    /// OIDN's runtime pipeline (`hush_net::denoise`: autoexposure of the input, transfer, network, inverse
     /// transfer).
     pub fn denoise(&self, color: &Image, aux: &[&Image]) -> Result<Image> {
         if color.channels != 3 {
@@ -99,9 +104,9 @@ mod tests {
     fn loads_oidn_weights_and_checks_inputs() {
         let model = Denoiser::load(&shared("weights/oidn-2.5.1/rt_hdr_alb_nrm.tza")).unwrap();
         assert_eq!(model.features(), &[Feature::Albedo, Feature::Normal]);
-        assert_eq!(model.info.net.kind, hush_net::UNetKind::Unet);
+        assert_eq!(model.info.net.as_unet().map(|c| c.kind), Some(hush_net::UNetKind::Unet));
         let small = Denoiser::load(&shared("weights/oidn-2.5.1/rt_hdr_alb_nrm_small.tza")).unwrap();
-        assert_eq!(small.info.net.kind, hush_net::UNetKind::UnetSmall);
+        assert_eq!(small.info.net.as_unet().map(|c| c.kind), Some(hush_net::UNetKind::UnetSmall));
 
         let read = |name: &str| {
             let path = shared(&format!("reference/oidn-2.5.1/input_{name}.exr"));

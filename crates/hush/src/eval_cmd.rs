@@ -191,9 +191,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
     for path in &args.models {
         let (name, denoiser) = (method_name(path), Denoiser::load(path)?);
         let info = &denoiser.info;
-        report
-            .notes
-            .push(format!("Model {name}: {:?} width {} on features {}.", info.net.kind, info.net.width, info.features));
+        report.notes.push(format!("Model {name}: {} on features {}.", info.net.describe(), info.features));
         methods.push(Box::new(Model { name, denoiser }));
     }
     let all: Vec<String> = BASELINES.iter().map(|(name, _)| name.to_string()).collect();

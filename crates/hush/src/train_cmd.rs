@@ -8,7 +8,7 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use hush_dataset::{Image, Manifest, Split, load_view, write_atomic};
 use hush_net::transfer::Transfer;
-use hush_net::{Features, Loss, UNetConfig, UNetKind};
+use hush_net::{Activation, Features, Loss, NetConfig, PatchMlpConfig, UNetConfig, UNetKind};
 use hush_train::{
     Augment, EpochRow, LossRow, OptimizerConfig, Schedule, TrainConfig, TrainError, TrainSample, plot_losses,
     read_train_state, train,
@@ -45,10 +45,12 @@ pub struct TrainArgs {
     /// Noisy images of these spp are the inputs (all of them if not given).
     #[arg(long, value_delimiter = ',')]
     pub spp: Option<Vec<u32>>,
-    /// Network: unet (OIDN's), unet_small, unet_large or autoencoder (the thesis's M_DAE) [default: unet].
+    /// Network: unet (OIDN's), unet_small, unet_large, autoencoder (the thesis's M_DAE), or patch_mlp (Burger et
+    /// al.'s MLP on 17×17 patches at stride 3, tanh; patch_mlp_relu with ReLU) [default: unet].
     #[arg(long)]
     pub arch: Option<String>,
-    /// Width multiplier of the network (1.0 = OIDN's widths; the thesis's M1 0.66, M2 0.33) [default: 0.25].
+    /// Width multiplier of the network (1.0 = OIDN's widths; the thesis's M1 0.66, M2 0.33; for patch_mlp, of
+    /// four hidden layers of 2047 units) [default: 0.25].
     #[arg(long)]
     pub width: Option<f64>,
     /// Loss: l1, mse, ssim, msssim, mix (0.16·L1 + 0.84·(1 − MS-SSIM)), mape, smape, l1_grad [default: mix].
@@ -153,12 +155,32 @@ fn parse_features(s: &str) -> Result<Features> {
     Ok(Features::parse(alias.unwrap_or(s))?)
 }
 
-fn parse_arch(s: &str) -> Result<UNetKind> {
+/// A `--arch`: a U-Net kind or the patch MLP with its activation.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Arch {
+    UNet(UNetKind),
+    PatchMlp(Activation),
+}
+
+impl Arch {
+    /// The network of this arch for `in_channels` input channels at width multiplier `width`.
+    fn config(self, in_channels: usize, width: f64) -> NetConfig {
+        match self {
+            Arch::UNet(kind) => UNetConfig { kind, in_channels, out_channels: 3, width }.into(),
+            Arch::PatchMlp(activation) => PatchMlpConfig::burger(in_channels, width, activation).into(),
+        }
+    }
+}
+
+fn parse_arch(s: &str) -> Result<Arch> {
     match s {
-        "oidn" => Ok(UNetKind::Unet),
-        "dae" | "m_dae" => Ok(UNetKind::Autoencoder),
-        _ => UNetKind::parse(s)
-            .with_context(|| format!("unknown --arch '{s}': use unet, unet_small, unet_large or autoencoder")),
+        "oidn" => Ok(Arch::UNet(UNetKind::Unet)),
+        "dae" | "m_dae" => Ok(Arch::UNet(UNetKind::Autoencoder)),
+        "patch_mlp" | "mlp" => Ok(Arch::PatchMlp(Activation::Tanh)),
+        "patch_mlp_relu" => Ok(Arch::PatchMlp(Activation::Relu)),
+        _ => UNetKind::parse(s).map(Arch::UNet).with_context(|| {
+            format!("unknown --arch '{s}': use unet, unet_small, unet_large, autoencoder, patch_mlp or patch_mlp_relu")
+        }),
     }
 }
 
@@ -182,14 +204,21 @@ fn resolve(args: &TrainArgs, base: Option<&RunConfig>, train_images: usize) -> R
         Some(f) => parse_features(f)?,
         None => b.map_or_else(|| parse_features("color,albedo,normal"), |b| Ok(b.features.clone()))?,
     };
-    let net = UNetConfig {
-        kind: match &args.arch {
-            Some(a) => parse_arch(a)?,
-            None => b.map_or(UNetKind::Unet, |b| b.net.kind),
-        },
-        in_channels: features.in_channels(),
-        out_channels: 3,
-        width: args.width.or(b.map(|b| b.net.width)).unwrap_or(0.25),
+    let net = match (&args.arch, args.width, b) {
+        // Resuming without new network options: the run's own network, whatever its kind.
+        (None, None, Some(b)) => b.net.with_in_channels(features.in_channels()),
+        (arch, width, _) => {
+            let arch = match arch {
+                Some(a) => parse_arch(a)?,
+                None => match b.map(|b| &b.net) {
+                    Some(NetConfig::PatchMlp(c)) => Arch::PatchMlp(c.activation),
+                    Some(NetConfig::UNet(c)) => Arch::UNet(c.kind),
+                    None => Arch::UNet(UNetKind::Unet),
+                },
+            };
+            let base_width = b.and_then(|b| b.net.as_unet()).map(|c| c.width);
+            arch.config(features.in_channels(), width.or(base_width).unwrap_or(0.25))
+        }
     };
     let optimizer = match &args.optimizer {
         Some(o) => OptimizerConfig::parse(o)

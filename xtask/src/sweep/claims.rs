@@ -156,6 +156,11 @@ impl<'a> Group<'a> {
         mean(self.runs(group).iter().filter_map(|r| r.seconds_per_epoch()))
     }
 
+    /// Mean seconds to denoise one test image.
+    fn denoise_seconds(&self, group: &str) -> Option<f64> {
+        mean(self.runs(group).iter().flat_map(|r| r.model_rows()).filter_map(|r| r.denoise_seconds))
+    }
+
     /// The spp present in `group`'s evaluation, ascending.
     fn spps(&self, group: &str) -> Vec<u64> {
         let mut s: Vec<u64> = self.runs(group).iter().flat_map(|r| r.model_rows()).map(|r| r.spp).collect();
@@ -427,6 +432,35 @@ pub fn claims(sweep: &str, results: &[RunResult]) -> Vec<Claim> {
                 measured,
                 verdict,
             ));
+            out.push(g.better(
+                sweep,
+                "A CNN denoises better than Burger et al.'s patch MLP (§7.5.1, argued, not measured: \"the substantial \
+                 benefit of using Convolutional Neural Networks\")",
+                "oidn",
+                "mlp",
+                Metric::Psnr,
+            ));
+            let thesis = "The patch MLP denoises slowly (§7.5.1: patches, one MLP pass each and the merge \"take much \
+                          time\"; Burger et al. about a minute per 512² image)";
+            out.push(match (g.denoise_seconds("oidn"), g.denoise_seconds("mlp")) {
+                (Some(o), Some(m)) => claim(
+                    thesis,
+                    format!(
+                        "denoise s per image: oidn {o:.3}, mlp {m:.3} (×{:.2}). Rule: reproduced if the MLP is slower \
+                         than OIDN's U-Net by more than {:.0}%, refuted if faster by more than that",
+                        m / o,
+                        100.0 * TIME_MARGIN
+                    ),
+                    if m > o * (1.0 + TIME_MARGIN) {
+                        Verdict::Reproduced
+                    } else if m * (1.0 + TIME_MARGIN) < o {
+                        Verdict::Refuted
+                    } else {
+                        Verdict::Inconclusive
+                    },
+                ),
+                _ => claim(thesis, "needs runs `oidn`, `mlp`".into(), Verdict::NotMeasured),
+            });
             out
         }
         _ => Vec::new(),
@@ -482,7 +516,7 @@ mod tests {
             .iter()
             .map(|&(epoch, tr, te)| Epoch { epoch, train_loss: tr, test_loss: Some(te), seconds: epoch as f64 })
             .collect();
-        RunResult { run, done: true, epochs, eval }
+        RunResult { run, done: true, epochs, eval, pictures: vec![] }
     }
 
     #[test]
@@ -499,6 +533,30 @@ mod tests {
         let worse = result("ann", &[(4, 19.0), (64, 29.0), (4, 20.0), (64, 30.0), (4, 18.0), (64, 28.5)], &[]);
         let n = result("n", &[(4, 20.0), (64, 31.0), (4, 21.0), (64, 32.0), (4, 19.0), (64, 30.5)], &[]);
         assert_eq!(super::claims("features", &[n, worse])[2].verdict, Verdict::Inconclusive);
+    }
+
+    /// The patch MLP against OIDN's U-Net: quality by paired PSNR, speed by the mean denoise seconds.
+    #[test]
+    fn the_patch_mlp_against_the_unet() {
+        let timed = |group: &str, psnr: &[(u64, f64)], seconds: f64| {
+            let mut r = result(group, psnr, &[]);
+            r.eval.iter_mut().for_each(|row| row.denoise_seconds = Some(seconds));
+            r
+        };
+        let oidn = timed("oidn", &[(4, 25.0), (16, 26.0), (64, 24.0)], 0.2);
+        let find = |c: &[Claim], what: &str| c.iter().find(|c| c.thesis.contains(what)).cloned().expect(what);
+        let c = claims("architecture", &[oidn.clone(), timed("mlp", &[(4, 17.0), (16, 18.5), (64, 16.0)], 0.1)]);
+        assert_eq!(find(&c, "CNN denoises better").verdict, Verdict::Reproduced);
+        let slow = find(&c, "denoises slowly");
+        assert_eq!(slow.verdict, Verdict::Refuted, "{slow:?}");
+        assert!(slow.measured.contains("oidn 0.200, mlp 0.100 (×0.50)"), "{}", slow.measured);
+        let c = claims("architecture", &[oidn.clone(), timed("mlp", &[(4, 26.0), (16, 27.5), (64, 25.0)], 0.5)]);
+        assert_eq!(find(&c, "CNN denoises better").verdict, Verdict::Refuted);
+        assert_eq!(find(&c, "denoises slowly").verdict, Verdict::Reproduced);
+        let c = claims("architecture", &[oidn, timed("mlp", &[(4, 25.0), (16, 26.5), (64, 23.0)], 0.21)]);
+        assert_eq!(find(&c, "CNN denoises better").verdict, Verdict::Inconclusive);
+        assert_eq!(find(&c, "denoises slowly").verdict, Verdict::Inconclusive);
+        assert_eq!(find(&claims("architecture", &[]), "denoises slowly").verdict, Verdict::NotMeasured);
     }
 
     #[test]

@@ -136,6 +136,7 @@ pub fn write(sweep: &Sweep, scale: &Scale, results: &[RunResult], dir: &Path) ->
         }
         let _ = writeln!(md, "\n## Images\n\n{view} at {spp} spp (tonemapped previews of `hush eval`).\n");
         let _ = writeln!(md, "| {} |\n|{}\n| {} |", head.join(" | "), "---|".repeat(head.len()), cells.join(" | "));
+        md += &crops_and_differences(&done, &view, spp);
     }
 
     // Error against run time.
@@ -205,6 +206,47 @@ pub fn write(sweep: &Sweep, scale: &Scale, results: &[RunResult], dir: &Path) ->
     write_file(&dir.join("report.md"), &md)?;
     write_file(&dir.join("report.html"), &html(&md, &format!("{} at {}", sweep.name, scale.name)))?;
     Ok(claims)
+}
+
+/// Per run, its model's crop of the window where the noisy input is worst and its difference picture against
+/// the reference, as `hush eval` drew them (the thesis's figures 7.5–7.7 compare the losses this way); the
+/// noisy input and the reference first. Empty if no run has pictures.
+fn crops_and_differences(done: &[&RunResult], view: &str, spp: u64) -> String {
+    let image = |r: &RunResult, path: Option<&str>, alt: &str| {
+        path.map_or("–".to_string(), |p| format!("![{alt}]({}/eval/{p})", r.run.name))
+    };
+    let mut rows = Vec::new();
+    if let Some(r) = done.iter().find(|r| r.crop(view, spp, "reference").is_some()) {
+        rows.push(format!("| reference | {} | – | – |", image(r, r.crop(view, spp, "reference"), "reference")));
+    }
+    if let Some(r) = done.iter().find(|r| r.crop(view, spp, "noisy").is_some()) {
+        let (diff, shares) = r.difference(view, spp, "noisy").unzip();
+        let diff = image(r, diff, "noisy: pixels off");
+        rows.push(format!(
+            "| noisy | {} | {diff} | {} |",
+            image(r, r.crop(view, spp, "noisy"), "noisy"),
+            shares.unwrap_or("–")
+        ));
+    }
+    let before = rows.len();
+    for r in done {
+        let Some(method) = r.model_rows().first().map(|m| m.method.clone()) else { continue };
+        let Some(crop) = r.crop(view, spp, &method) else { continue };
+        let (diff, shares) = r.difference(view, spp, &method).unzip();
+        let name = &r.run.name;
+        let diff = image(r, diff, &format!("{name}: pixels off"));
+        rows.push(format!("| {name} | {} | {diff} | {} |", image(r, Some(crop), name), shares.unwrap_or("–")));
+    }
+    if rows.len() == before {
+        return String::new();
+    }
+    format!(
+        "\n## Crops and differences\n\n{view} at {spp} spp: each run's denoised crop of the window where the noisy \
+         input is worst, and its pixels off the reference by more than 3 % (yellow) and 10 % (red) after the \
+         evaluation tonemap, as in the thesis's figures 7.5–7.7 (`hush eval`'s pictures).\n\n\
+         | run | crop | pixels off | share > 3 %, > 10 % |\n|---|---|---|---|\n{}\n",
+        rows.join("\n")
+    )
 }
 
 /// The error-against-run-time table of `runs` (named by `label`) and its plot `error-vs-time.svg` in `dir`.
@@ -406,7 +448,7 @@ fn scale_note(scale: &Scale) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sweep::results::{Epoch, EvalRow};
+    use crate::sweep::results::{Epoch, EvalRow, Picture};
 
     #[test]
     fn markdown_to_html() {
@@ -449,8 +491,17 @@ mod tests {
                 done: true,
                 epochs: vec![Epoch { epoch: 1, train_loss: 0.5, test_loss: Some(0.6), seconds: 3.0 }],
                 eval: vec![row("noisy", 20.0), row("train/model", 25.0)],
+                pictures: [
+                    ("crops", "reference", "r.png"),
+                    ("crops", "noisy", "n.png"),
+                    ("crops", "train/model", "m.png"),
+                    ("pixels off by more than 3 % and 10 %", "noisy: 40.0 % > 3 %, 9.0 % > 10 %", "nd.png"),
+                    ("pixels off by more than 3 % and 10 %", "train/model: 12.5 % > 3 %, 1.0 % > 10 %", "md.png"),
+                ]
+                .map(|(t, c, p)| Picture { title: format!("v at 4 spp: {t}"), caption: c.into(), path: p.into() })
+                .to_vec(),
             },
-            RunResult { run: runs[1].clone(), done: false, epochs: vec![], eval: vec![] },
+            RunResult { run: runs[1].clone(), done: false, epochs: vec![], eval: vec![], pictures: vec![] },
         ];
         let dir = std::env::temp_dir().join(format!("xtask-report-{}", std::process::id()));
         let claims = write(&sweep, &scale, &results, &dir).unwrap();
@@ -467,6 +518,18 @@ mod tests {
         assert!(md.contains("| noisy | 20.00 / 0.5000 |"));
         assert!(
             md.contains("| ![noisy](oidn/eval/previews/noisy.png) | ![oidn](oidn/eval/previews/train/model.png) |"),
+            "{md}"
+        );
+        assert!(md.contains("## Crops and differences"), "{md}");
+        assert!(md.contains("| reference | ![reference](oidn/eval/r.png) | – | – |"), "{md}");
+        assert!(
+            md.contains("| noisy | ![noisy](oidn/eval/n.png) | ![noisy: pixels off](oidn/eval/nd.png) | 40.0 %"),
+            "{md}"
+        );
+        assert!(
+            md.contains(
+                "| oidn | ![oidn](oidn/eval/m.png) | ![oidn: pixels off](oidn/eval/md.png) | 12.5 % > 3 %, 1.0 % > 10 % |"
+            ),
             "{md}"
         );
         assert_eq!(claims[0].verdict, crate::sweep::claims::Verdict::NotMeasured);

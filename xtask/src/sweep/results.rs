@@ -36,6 +36,17 @@ pub struct EvalRow {
     pub preview: Option<String>,
 }
 
+/// One image of `eval/summary.json`'s figures (crops of the worst window, difference pictures).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Picture {
+    /// The figure's title: `<view> at <spp> spp: crops` or `<view> at <spp> spp: pixels off by ...`.
+    pub title: String,
+    /// The method (crops) or `<method>: <share> % > 3 %, <share> % > 10 %` (difference pictures).
+    pub caption: String,
+    /// Relative to the evaluation folder.
+    pub path: String,
+}
+
 /// A run and its results (empty where a file is missing).
 #[derive(Clone, Debug)]
 pub struct RunResult {
@@ -43,6 +54,7 @@ pub struct RunResult {
     pub done: bool,
     pub epochs: Vec<Epoch>,
     pub eval: Vec<EvalRow>,
+    pub pictures: Vec<Picture>,
 }
 
 pub fn parse_metrics_csv(text: &str) -> Vec<Epoch> {
@@ -88,11 +100,50 @@ pub fn parse_eval(summary: &Value) -> Vec<EvalRow> {
         .collect()
 }
 
+/// The images of the figures of an evaluation summary.
+pub fn parse_pictures(summary: &Value) -> Vec<Picture> {
+    let figures = summary["figures"].as_array().cloned().unwrap_or_default();
+    figures
+        .iter()
+        .flat_map(|f| {
+            let title = f["title"].as_str().unwrap_or_default().to_string();
+            let images = f["images"].as_array().cloned().unwrap_or_default();
+            images.into_iter().filter_map(move |i| {
+                Some(Picture {
+                    title: title.clone(),
+                    caption: i["caption"].as_str()?.to_string(),
+                    path: i["path"].as_str()?.to_string(),
+                })
+            })
+        })
+        .collect()
+}
+
 impl RunResult {
     pub fn load(run: &Run, dir: &Path) -> RunResult {
         let epochs = parse_metrics_csv(&std::fs::read_to_string(dir.join("train/metrics.csv")).unwrap_or_default());
-        let eval = read_json(&dir.join("eval/summary.json")).map(|v| parse_eval(&v)).unwrap_or_default();
-        RunResult { run: run.clone(), done: dir.join("done.json").is_file(), epochs, eval }
+        let summary = read_json(&dir.join("eval/summary.json"));
+        let eval = summary.as_ref().map(parse_eval).unwrap_or_default();
+        let pictures = summary.as_ref().map(parse_pictures).unwrap_or_default();
+        RunResult { run: run.clone(), done: dir.join("done.json").is_file(), epochs, eval, pictures }
+    }
+
+    /// `method`'s crop of the worst window of `view` at `spp` (`hush eval`'s figure `<view> at <spp> spp:
+    /// crops`), relative to the evaluation folder.
+    pub fn crop(&self, view: &str, spp: u64, method: &str) -> Option<&str> {
+        let title = format!("{view} at {spp} spp: crops");
+        self.pictures.iter().find(|p| p.title == title && p.caption == method).map(|p| p.path.as_str())
+    }
+
+    /// `method`'s difference picture of `view` at `spp` and the shares of pixels it marks (the caption after
+    /// the method's name).
+    pub fn difference(&self, view: &str, spp: u64, method: &str) -> Option<(&str, &str)> {
+        let title = format!("{view} at {spp} spp: pixels off");
+        let prefix = format!("{method}: ");
+        self.pictures.iter().find_map(|p| {
+            let shares = p.caption.strip_prefix(&prefix)?;
+            p.title.starts_with(&title).then_some((p.path.as_str(), shares))
+        })
     }
 
     /// The rows of the trained model (the method that is neither `noisy` nor `reference`, preferring
@@ -154,6 +205,7 @@ mod tests {
             done: true,
             epochs: parse_metrics_csv(csv),
             eval: Vec::new(),
+            pictures: Vec::new(),
         };
         assert_eq!(r.epochs.len(), 3);
         assert_eq!(r.epochs[1].test_loss, None);
@@ -187,9 +239,42 @@ mod tests {
         ]});
         let rows = parse_eval(&v2);
         assert_eq!((rows[0].render_seconds, rows[0].denoise_seconds), (Some(1.5), Some(0.3)));
-        let r = RunResult { run: RunResult::load_dummy(), done: true, epochs: Vec::new(), eval: rows };
+        let r =
+            RunResult { run: RunResult::load_dummy(), done: true, epochs: Vec::new(), eval: rows, pictures: vec![] };
         assert_eq!(r.model_rows().len(), 1);
         assert_eq!(r.model_rows()[0].method, "train/model");
+    }
+
+    /// The crops and difference pictures of `hush eval`'s figures, found by view, spp and method.
+    #[test]
+    fn pictures_of_the_figures() {
+        let summary = serde_json::json!({"schema": 2, "rows": [], "figures": [
+            {"title": "v at 4 spp: crops", "images": [
+                {"caption": "noisy", "path": "pictures/v_000004_noisy_crop.png"},
+                {"caption": "train/model", "path": "pictures/v_000004_train-model_crop.png"},
+                {"caption": "reference", "path": "pictures/v_000004_reference_crop.png"}]},
+            {"title": "v at 4 spp: pixels off by more than 3 % and 10 %", "images": [
+                {"caption": "noisy: 40.0 % > 3 %, 9.0 % > 10 %", "path": "pictures/v_000004_noisy_diff.png"},
+                {"caption": "train/model: 12.5 % > 3 %, 1.0 % > 10 %", "path": "pictures/v_model_diff.png"}]},
+            {"title": "v at 16 spp: crops", "images": [{"caption": "train/model", "path": "pictures/16.png"}]},
+        ]});
+        let r = RunResult {
+            run: RunResult::load_dummy(),
+            done: true,
+            epochs: Vec::new(),
+            eval: Vec::new(),
+            pictures: parse_pictures(&summary),
+        };
+        assert_eq!(r.pictures.len(), 6);
+        assert_eq!(r.crop("v", 4, "train/model"), Some("pictures/v_000004_train-model_crop.png"));
+        assert_eq!(r.crop("v", 16, "train/model"), Some("pictures/16.png"));
+        assert_eq!(r.crop("v", 4, "reference"), Some("pictures/v_000004_reference_crop.png"));
+        assert_eq!(r.crop("w", 4, "train/model"), None);
+        assert_eq!(
+            r.difference("v", 4, "train/model"),
+            Some(("pictures/v_model_diff.png", "12.5 % > 3 %, 1.0 % > 10 %"))
+        );
+        assert_eq!(r.difference("v", 16, "train/model"), None);
     }
 
     impl RunResult {

@@ -453,12 +453,9 @@ fn non_finite_input_never_blanks_the_image() -> Result<()> {
     use hush_net::{Features, ModelInfo, UNet, UNetConfig, denoise, init_weights, transfer::Transfer};
     let (w, h) = (48, 32);
     let varmap = VarMap::new();
-    let info = ModelInfo {
-        net: UNetConfig { width: 0.25, ..UNetConfig::oidn(3) },
-        features: Features::default(),
-        transfer: Transfer::Pu,
-    };
-    let net = UNet::new(VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu), &info.net)?;
+    let cfg = UNetConfig { width: 0.25, ..UNetConfig::oidn(3) };
+    let info = ModelInfo { net: cfg.clone().into(), features: Features::default(), transfer: Transfer::Pu };
+    let net = UNet::new(VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu), &cfg)?;
     init_weights(&varmap, 17)?;
     let images = stiff_images(w, h);
     let clean = denoise(&net, &info, w, h, &images[0].1, &[])?;

@@ -2,8 +2,8 @@ use candle_core::{DType, Device, Module, Result};
 use candle_nn::{VarBuilder, VarMap};
 use hush_net::transfer::Transfer;
 use hush_net::{
-    Features, ModelInfo, UNet, UNetConfig, UNetKind, init_weights, load_model, load_weights, read_metadata,
-    save_weights,
+    Activation, Features, ModelInfo, Net, PatchMlpConfig, UNet, UNetConfig, UNetKind, init_weights, load_model,
+    load_weights, read_metadata, save_weights,
 };
 
 use crate::{det_tensor, max_abs_diff};
@@ -11,12 +11,12 @@ use crate::{det_tensor, max_abs_diff};
 fn info(width: f64) -> ModelInfo {
     let features = Features::parse("alb,nrm").unwrap();
     let net = UNetConfig { kind: UNetKind::Unet, in_channels: features.in_channels(), out_channels: 3, width };
-    ModelInfo { net, features, transfer: Transfer::Pu }
+    ModelInfo { net: net.into(), features, transfer: Transfer::Pu }
 }
 
 fn build(info: &ModelInfo, seed: u64) -> Result<(VarMap, UNet)> {
     let varmap = VarMap::new();
-    let net = UNet::new(VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu), &info.net)?;
+    let net = UNet::new(VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu), info.net.as_unet().unwrap())?;
     init_weights(&varmap, seed)?;
     Ok((varmap, net))
 }
@@ -85,7 +85,32 @@ fn mismatches_are_clear_errors() -> Result<()> {
 
     // Metadata whose channel count disagrees with its features is refused when saving.
     let mut bad = small.clone();
-    bad.net.in_channels = 12;
+    bad.net = bad.net.with_in_channels(12);
     assert!(save_weights(&small_map, &bad).unwrap_err().to_string().contains("12 input channels"));
+    Ok(())
+}
+
+/// The patch MLP is a model like the U-Nets: its weights file records it, `load_model` rebuilds it, and the
+/// rebuilt network gives bit-identical outputs on an image whose size is not a multiple of the stride.
+#[test]
+fn patch_mlp_round_trip() -> Result<()> {
+    let features = Features::parse("alb,nrm").unwrap();
+    let cfg = PatchMlpConfig::burger(features.in_channels(), 0.01, Activation::Tanh);
+    let info = ModelInfo { net: cfg.clone().into(), features, transfer: Transfer::Pu };
+    let varmap = VarMap::new();
+    let net = Net::new(VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu), &info.net)?;
+    init_weights(&varmap, 6)?;
+    let x = det_tensor(&[1, 9, 22, 19], 0.0, 1.0, 21)?;
+    let y = net.forward(&x)?;
+    assert_eq!(y.dims(), &[1, 3, 22, 19]);
+    let bytes = save_weights(&varmap, &info)?;
+    let (loaded, loaded_info) = load_model(&bytes, &Device::Cpu)?;
+    assert_eq!(loaded_info, info);
+    assert!(matches!(loaded, Net::PatchMlp(_)));
+    assert_eq!(max_abs_diff(&loaded.forward_padded(&x)?, &y)?, 0.0);
+    // A U-Net's weights are not a patch MLP's: the error names the tensors.
+    let (unet_map, _) = build(&self::info(0.25), 7)?;
+    let err = load_weights(&varmap, &save_weights(&unet_map, &self::info(0.25))?).unwrap_err().to_string();
+    assert!(err.contains("enc_conv0"), "{err}");
     Ok(())
 }

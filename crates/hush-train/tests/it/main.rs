@@ -8,7 +8,7 @@ use std::ops::ControlFlow;
 use candle_core::Device;
 use hush_dataset::Image;
 use hush_net::transfer::{Transfer, autoexposure};
-use hush_net::{Features, UNetConfig, UNetKind, load_model, prepare_color};
+use hush_net::{Activation, Features, PatchMlpConfig, UNetConfig, UNetKind, load_model, prepare_color};
 use hush_train::{
     Augment, EpochRow, OptimizerConfig, Schedule, TrainConfig, TrainError, TrainSample, Trained, plot_losses,
     read_train_state, train,
@@ -40,7 +40,7 @@ fn synthetic(n: usize) -> Vec<TrainSample> {
 
 fn config(steps: usize) -> TrainConfig {
     let mut cfg = TrainConfig::thesis(Features::default());
-    cfg.net = UNetConfig { kind: UNetKind::Unet, in_channels: 3, out_channels: 3, width: 0.25 };
+    cfg.net = UNetConfig { kind: UNetKind::Unet, in_channels: 3, out_channels: 3, width: 0.25 }.into();
     cfg.steps = steps;
     cfg.batch = 4;
     cfg.crop = 32;
@@ -82,6 +82,22 @@ fn loss_goes_down_on_a_toy_denoising_problem() {
     assert_eq!(trained.log[29].epoch, 30);
     assert!(trained.log.windows(2).all(|w| w[0].seconds <= w[1].seconds));
     assert!(!trained.stopped_early);
+}
+
+/// The patch MLP trains in the same loop, on the same crops and loss, and its weights load back as one.
+#[test]
+fn the_patch_mlp_trains_like_the_unets() {
+    let samples = synthetic(4);
+    let mut cfg = config(30);
+    cfg.net = PatchMlpConfig::burger(3, 0.03, Activation::Tanh).into();
+    let trained = run(&cfg, &samples).unwrap();
+    let l = losses(&trained);
+    let first: f64 = l[..5].iter().sum::<f64>() / 5.0;
+    let last: f64 = l[25..].iter().sum::<f64>() / 5.0;
+    assert!(last < 0.5 * first, "loss did not drop enough: first steps {first:.4}, last steps {last:.4}: {l:?}");
+    let (net, info) = load_model(&trained.weights, &Device::Cpu).unwrap();
+    assert!(matches!(net, hush_net::Net::PatchMlp(_)));
+    assert_eq!(info.net, cfg.net);
 }
 
 #[test]
@@ -212,13 +228,13 @@ fn resume_refuses_another_run() {
         train(c, s, &[], &Device::Cpu, Some(&checkpoint), |_| ControlFlow::Continue(())).unwrap_err().to_string()
     };
     let mut wider = cfg.clone();
-    (wider.net.width, wider.steps) = (0.5, 4);
+    (wider.net, wider.steps) = (UNetConfig { width: 0.5, ..cfg.net.as_unet().unwrap().clone() }.into(), 4);
     let err = resume(&wider, &samples);
     assert!(err.contains("cannot resume") && err.contains("width 0.25") && err.contains("width 0.5"), "{err}");
 
     let mut with_normals = cfg.clone();
     with_normals.features = Features::parse("nrm").unwrap();
-    with_normals.net.in_channels = 6;
+    with_normals.net = cfg.net.with_in_channels(6);
     let normal = Image::from_fn(32, 32, 3, |_, _, c| if c == 2 { 1.0 } else { 0.0 });
     let six: Vec<TrainSample> = samples
         .iter()
@@ -284,7 +300,7 @@ fn bad_configurations_and_data_are_refused() {
     let mut cfg = config(2);
     cfg.features = Features::parse("alb").unwrap();
     assert!(run(&cfg, &samples).unwrap_err().to_string().contains("input channels"));
-    cfg.net.in_channels = 6;
+    cfg.net = cfg.net.with_in_channels(6);
     assert!(run(&cfg, &samples).unwrap_err().to_string().contains("training sample 0: input has 3 channels"));
     let mut cfg = config(2);
     cfg.lr = 0.0;
