@@ -1,5 +1,6 @@
 //! hush-train's integration tests: tiny synthetic denoising problems, seconds in total.
 
+mod cache;
 mod optim;
 mod schedule;
 
