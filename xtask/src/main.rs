@@ -10,6 +10,7 @@ mod mitsuba;
 mod procedural;
 mod sweep;
 mod test;
+mod train_check;
 mod util;
 
 use std::process::ExitCode;
@@ -23,6 +24,10 @@ tasks:
                              hush eval on the demo's dataset and model with every baseline: report,
                              error against run time, pictures in target/eval/ (--check-html: render
                              report.html in headless Chromium)
+  train-check [--release] [--resume] [--steps N]
+                             train a narrow U-Net on a small dataset of the Cornell box and Veach's MIS
+                             scene; fail unless it beats the noisy input by >= 5 dB PSNR on each scene's
+                             held-out views at 4 spp (target/train-check/summary.json)
   bench render [--release] [--spp N]
                              M paths per CPU-second and relMSE × CPU-seconds on the Cornell box
                              (512², max_depth 8), hush against Mitsuba 3 when it is installed
@@ -52,6 +57,7 @@ fn main() -> ExitCode {
         Some("procedural") => procedural::run(&args[1..]),
         Some("baselines") => baselines::run(&args[1..]),
         Some("sweep") => sweep::run(&args[1..]),
+        Some("train-check") => train_check::run(&args[1..]),
         _ => Err(format!("{USAGE}{}", sweep::USAGE)),
     };
     match result {
