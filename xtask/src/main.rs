@@ -36,7 +36,8 @@ tasks:
   bench net [--release]      U-Net inference at 512² against official OIDN, a training step's GFLOP/s against
                              the machine's GEMM rate, peak memory, for 1 and 2 threads
   bench train [--release] [--steps N]
-                             steps per second and the loader's share of `hush train` (the demo's settings)
+                             steps per second, the loader's share and the seconds until the samples are
+                             ready (from the f16 cache when it is intact) of `hush train` (the demo's settings)
   baselines setup            install OIDN 2.5.1, BM3D, flip-evaluator, scikit-image (PyPI) into target/baselines-venv
   baselines check            run BM3D and OIDN through hush-eval on a Cornell box crop; fail unless both help
   procedural check [--count N] [--seed S] [--features default|basic|...]
