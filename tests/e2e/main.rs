@@ -280,6 +280,13 @@ fn manifest_of(dir: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(dir.join("manifest.json")).unwrap()).unwrap()
 }
 
+/// The split of each view of `scene` in a manifest, in view order.
+fn splits_of<'a>(manifest: &'a serde_json::Value, scene: &str) -> Vec<&'a str> {
+    let mut views: Vec<_> = manifest["views"].as_array().unwrap().iter().filter(|v| v["scene"] == scene).collect();
+    views.sort_by_key(|v| v["view"].as_str().unwrap().to_string());
+    views.iter().map(|v| v["split"].as_str().unwrap()).collect()
+}
+
 /// Two scenes (one found by scanning a folder) × two views at 64²: names as OIDN's toolkit expects,
 /// the split by scene, the reference check recorded, `check` passes; then `check` catches damage, and a
 /// re-run repairs exactly the damaged file.
@@ -316,10 +323,7 @@ fn dataset_of_two_scenes_passes_check() {
     let m = manifest_of(&ds);
     let views = m["views"].as_array().unwrap();
     assert_eq!(views.len(), 4);
-    let split_of = |scene: &str| {
-        views.iter().filter(|v| v["scene"] == scene).map(|v| v["split"].as_str().unwrap()).collect::<Vec<_>>()
-    };
-    assert_eq!((split_of("blue-box"), split_of("cbox")), (vec!["train", "train"], vec!["test", "test"]));
+    assert_eq!((splits_of(&m, "blue-box"), splits_of(&m, "cbox")), (vec!["train", "train"], vec!["test", "test"]));
     for v in views {
         let check = &v["reference"]["check"];
         assert!(check["rel_mse"].as_f64().unwrap() > 0.0 && check["spp"] == 16, "{v}");
@@ -348,6 +352,41 @@ fn dataset_of_two_scenes_passes_check() {
     expect_success(&args);
     expect_success(&["dataset", "check", s(&ds)]);
     assert_eq!(std::fs::metadata(ds.join("cbox_v001_ref.hdr.exr")).unwrap().modified().unwrap(), untouched);
+}
+
+/// With `--split-views` every scene of a multi-scene dataset is trained on and tested on: each scene's last
+/// `--test-views` views form the test split instead of whole scenes.
+#[test]
+fn split_views_holds_out_each_scenes_last_views() {
+    let dir = scratch("dataset-split-views");
+    let scenes = dir.join("scenes");
+    let blue = blue_box(&scenes);
+    let ds = dir.join("ds");
+    let cbox = cbox();
+    expect_success(&[
+        "dataset",
+        s(&cbox),
+        s(&blue),
+        "--out",
+        s(&ds),
+        "--split-views",
+        "--views",
+        "3",
+        "--test-views",
+        "1",
+        "--spp",
+        "1",
+        "--aux-spp",
+        "1",
+        "--ref-spp",
+        "2",
+        "--size",
+        "32",
+    ]);
+    let m = manifest_of(&ds);
+    for scene in ["blue-box", "cbox"] {
+        assert_eq!(splits_of(&m, scene), vec!["train", "train", "test"], "{scene}");
+    }
 }
 
 /// Every file recorded in a manifest file, with its inode and modification time.

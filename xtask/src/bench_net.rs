@@ -174,6 +174,7 @@ pub fn train(args: &[String]) -> Result<()> {
         "seconds": summary["seconds"],
         "steps_per_second": summary["steps_per_second"],
         "loader_share": summary["loader_share"],
+        "load_seconds": summary["load_seconds"],
         "threads": summary["threads"],
         "load_average": { "before": load_before, "after": load_average() },
     });

@@ -56,6 +56,20 @@ pub fn train(hush: &Path, paths: &DemoPaths) -> Result<()> {
     spawn(&mut train_command(hush, &paths.dataset, &paths.run_dir, 1000))
 }
 
+/// `hush eval` of one model on a dataset's test split into `out` (add baselines and options to it).
+pub fn eval_command(hush: &Path, dataset: &Path, model: &Path, out: &Path) -> Command {
+    let mut cmd = Command::new(hush);
+    cmd.arg("eval").arg("--dataset").arg(dataset).arg("--model").arg(model).arg("--out").arg(out);
+    cmd
+}
+
+/// The result rows of the `summary.json` that `hush eval` wrote into `dir`.
+pub fn eval_rows(dir: &Path) -> Result<Vec<serde_json::Value>> {
+    let path = dir.join("summary.json");
+    let summary = read_json(&path)?;
+    summary["rows"].as_array().cloned().ok_or_else(|| format!("{} has no rows", path.display()))
+}
+
 pub fn run(args: &[String]) -> Result<()> {
     ensure_vulkan()?;
     let hush = build_hush(release(args))?;
@@ -68,19 +82,9 @@ pub fn run(args: &[String]) -> Result<()> {
     }
     render_dataset(&hush, &paths)?;
     train(&hush, &paths)?;
-    spawn(
-        Command::new(&hush)
-            .arg("eval")
-            .arg("--dataset")
-            .arg(&paths.dataset)
-            .arg("--model")
-            .arg(paths.model())
-            .arg("--out")
-            .arg(dir),
-    )?;
+    spawn(&mut eval_command(&hush, &paths.dataset, &paths.model(), dir))?;
 
-    let summary = read_json(&dir.join("summary.json"))?;
-    let rows = summary["rows"].as_array().ok_or("summary.json has no rows")?;
+    let rows = eval_rows(dir)?;
     let psnr = |view: &str, spp: u64, noisy: bool| {
         rows.iter()
             .find(|r| r["view"] == view && r["spp"].as_u64() == Some(spp) && (r["method"] == "noisy") == noisy)

@@ -10,7 +10,7 @@
 use std::path::PathBuf;
 use std::process::Command;
 
-use crate::demo::{self, DemoPaths};
+use crate::demo::{self, DemoPaths, eval_command};
 use crate::util::{Result, build_hush, cargo, ensure_vulkan, is_root, project_root, release, spawn, target_dir};
 
 const USAGE: &str =
@@ -50,17 +50,7 @@ pub fn run(args: &[String]) -> Result<()> {
         }
         _ => return Err(format!("--dataset and --model go together\n{USAGE}")),
     };
-    spawn(
-        Command::new(&hush)
-            .arg("eval")
-            .arg("--dataset")
-            .arg(&dataset)
-            .arg("--model")
-            .arg(&model)
-            .args(["--baseline", "all", "--timing-runs", &timing_runs])
-            .arg("--out")
-            .arg(&out),
-    )?;
+    spawn(eval_command(&hush, &dataset, &model, &out).args(["--baseline", "all", "--timing-runs", &timing_runs]))?;
     let html = out.join("report.html");
     if args.iter().any(|a| a == "--check-html") {
         check_html(&html)?;

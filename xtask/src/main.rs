@@ -10,6 +10,7 @@ mod mitsuba;
 mod procedural;
 mod sweep;
 mod test;
+mod train_check;
 mod util;
 
 use std::process::ExitCode;
@@ -23,6 +24,10 @@ tasks:
                              hush eval on the demo's dataset and model with every baseline: report,
                              error against run time, pictures in target/eval/ (--check-html: render
                              report.html in headless Chromium)
+  train-check [--release] [--resume] [--steps N]
+                             train a narrow U-Net on a small dataset of the Cornell box and Veach's MIS
+                             scene; fail unless it beats the noisy input by >= 5 dB PSNR on each scene's
+                             held-out views at 4 spp (target/train-check/summary.json)
   bench render [--release] [--spp N]
                              M paths per CPU-second and relMSE × CPU-seconds on the Cornell box
                              (512², max_depth 8), hush against Mitsuba 3 when it is installed
@@ -31,7 +36,8 @@ tasks:
   bench net [--release]      U-Net inference at 512² against official OIDN, a training step's GFLOP/s against
                              the machine's GEMM rate, peak memory, for 1 and 2 threads
   bench train [--release] [--steps N]
-                             steps per second and the loader's share of `hush train` (the demo's settings)
+                             steps per second, the loader's share and the seconds until the samples are
+                             ready (from the f16 cache when it is intact) of `hush train` (the demo's settings)
   baselines setup            install OIDN 2.5.1, BM3D, flip-evaluator, scikit-image (PyPI) into target/baselines-venv
   baselines check            run BM3D and OIDN through hush-eval on a Cornell box crop; fail unless both help
   procedural check [--count N] [--seed S] [--features default|basic|...]
@@ -52,6 +58,7 @@ fn main() -> ExitCode {
         Some("procedural") => procedural::run(&args[1..]),
         Some("baselines") => baselines::run(&args[1..]),
         Some("sweep") => sweep::run(&args[1..]),
+        Some("train-check") => train_check::run(&args[1..]),
         _ => Err(format!("{USAGE}{}", sweep::USAGE)),
     };
     match result {

@@ -13,7 +13,12 @@
 //! channel, then averaged. MS-SSIM uses 5 scales with 2×2 average pooling between them, contrast-structure
 //! at scales 1–4 and full SSIM at scale 5, each clamped at 0 (ReLU) before being raised to its weight.
 //!
-//! Two deliberate differences from OIDN:
+//! Three deliberate differences from OIDN:
+//! * Outputs below 0: the luminance term uses max(μ1·μ2, 0), which changes nothing for images ≥ 0 (every
+//!   target and metric input). Unclamped, a channel whose output mean falls below 0 has a negative SSIM at
+//!   the coarsest scale, which MS-SSIM clamps to 0 with a zero gradient (the channel never recovers), and an
+//!   inverted channel below 0 scores SSIM ≈ 1 (negative luminance × negative contrast). Training runs from
+//!   initializations with a negative output channel collapsed that way.
 //! * Numerical stability: σ² = `E[x²] − E[x]²` cancels catastrophically in f32 for large values
 //!   (1e4 + noise). Variance and covariance are shift invariant, so each image channel is first shifted
 //!   by a constant, the mean of `(x + y) / 2` over that channel, before filtering; the constant is added
@@ -279,7 +284,11 @@ fn ssim_per_channel(x: &Tensor, y: &Tensor) -> Result<(Tensor, Tensor)> {
     let sigma12 = (e_xy - (&mu1s * &mu2s)?)?;
 
     let cs_map = (((sigma12 * 2.0)? + C2)? / ((sigma1_sq + sigma2_sq)? + C2)?)?;
-    let luminance = ((((&mu1 * &mu2)? * 2.0)? + C1)? / ((mu1.sqr()? + mu2.sqr()?)? + C1)?)?;
+    // Local means of images ≥ 0 have μ1·μ2 ≥ 0, where the clamp changes nothing. A network's output can go
+    // below 0: there the unclamped term is negative, MS-SSIM's clamp at 0 then zeroes the whole channel with
+    // no gradient, and the channel stays dead. Clamped, the term stays positive and its gradient (through the
+    // denominator) raises the negative mean towards the target's.
+    let luminance = ((((&mu1 * &mu2)?.relu()? * 2.0)? + C1)? / ((mu1.sqr()? + mu2.sqr()?)? + C1)?)?;
     let ssim_map = (luminance * &cs_map)?;
     let ssim = ssim_map.mean((1, 2, 3))?.reshape((n, c))?;
     let cs = cs_map.mean((1, 2, 3))?.reshape((n, c))?;

@@ -21,6 +21,9 @@ pub enum TrainError {
         last_good.log.len()
     )]
     Diverged { step: usize, batch: String, cause: String, last_good: Box<Trained> },
+    /// Bytes that are not an intact sample cache of the expected key (see [`crate::decode_samples`]).
+    #[error("unusable sample cache: {0}")]
+    Cache(String),
     #[error(transparent)]
     Candle(#[from] candle_core::Error),
 }

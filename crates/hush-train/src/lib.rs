@@ -11,6 +11,8 @@
 //!   [`TrainSample::from_linear`] prepares one from linear images as OIDN's toolkit does.
 //! * [`train`]: runs the loop, reports every step to an observer, returns [`Trained`];
 //!   [`read_train_state`] reads where a checkpoint stands.
+//! * [`encode_samples`] / [`decode_samples`]: prepared samples as f16 bytes under a key with a checksum, for
+//!   an on-disk cache that a change of data or settings invalidates.
 //! * [`plot_losses`]: a PNG of the training and test loss curves.
 //!
 //! ```
@@ -37,6 +39,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+mod cache;
 mod checkpoint;
 mod config;
 mod error;
@@ -46,6 +49,7 @@ mod sample;
 mod schedule;
 mod train;
 
+pub use cache::{decode_samples, encode_samples, fnv1a, round_trip};
 pub use checkpoint::{STATE_KEY, TrainState, read_train_state};
 pub use config::TrainConfig;
 pub use error::{Result, TrainError};

@@ -129,7 +129,7 @@ impl Sampler {
         let n = self.sizes.len() as u64;
         let pass = k / n;
         if self.order.0 != pass {
-            let mut rng = SplitMix64::new(self.seed, 0x6f72_6465_72 ^ pass.rotate_left(17));
+            let mut rng = SplitMix64::new(self.seed, 0x6f_7264_6572 ^ pass.rotate_left(17));
             let mut order: Vec<usize> = (0..self.sizes.len()).collect();
             for i in (1..order.len()).rev() {
                 order.swap(i, rng.below(i as u64 + 1) as usize);

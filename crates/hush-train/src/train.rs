@@ -241,7 +241,7 @@ pub fn train(
 
             let mut report = StepReport { row, epoch: None };
             if step % epoch_steps == 0 || step == cfg.steps {
-                let evaluate = step == cfg.steps || (cfg.eval_every > 0 && epoch % cfg.eval_every == 0);
+                let evaluate = step == cfg.steps || (cfg.eval_every > 0 && epoch.is_multiple_of(cfg.eval_every));
                 let test_loss =
                     if evaluate && !test.is_empty() { Some(test_loss(&net, cfg, test, device)?) } else { None };
                 let is_best = test_loss.is_some_and(|t| best.is_none_or(|(_, b)| t < b));

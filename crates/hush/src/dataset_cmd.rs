@@ -42,9 +42,14 @@ pub struct DatasetArgs {
     /// Views per scene: v000 is the scene's own camera, the others are generated around it.
     #[arg(long, default_value_t = 4)]
     pub views: u32,
-    /// With a single scene: how many of its views (the last ones) form the test split.
+    /// With a single scene, or with --split-views: how many of each scene's views (the last ones) form the
+    /// test split.
     #[arg(long, default_value_t = 1)]
     pub test_views: u32,
+    /// With several scenes: hold out each scene's last --test-views views instead of whole scenes, so every
+    /// scene is trained on and tested on other views of it.
+    #[arg(long, conflicts_with = "test_scenes")]
+    pub split_views: bool,
     /// Scenes (by name) whose views form the test split. Default with several scenes: 5 in 13 of them
     /// (as the thesis: 8 train, 5 test), evenly spread over the scenes sorted by name.
     #[arg(long, value_delimiter = ',')]
@@ -262,7 +267,7 @@ fn load_scenes(args: &DatasetArgs, generated: &[PathBuf]) -> Result<(Vec<JobScen
         for s in &mut loaded {
             s.split = Some(if args.test_scenes.contains(&s.name) { Split::Test } else { Split::Train });
         }
-    } else if n > 1 {
+    } else if n > 1 && !args.split_views {
         // The thesis's proportion, 5 test scenes in 13, spread evenly over the sorted names.
         let tests = ((n * 5 + 6) / 13).max(1);
         for (i, s) in loaded.iter_mut().enumerate() {

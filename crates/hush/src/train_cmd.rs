@@ -10,8 +10,8 @@ use hush_dataset::{Image, Manifest, Split, load_view, write_atomic};
 use hush_net::transfer::Transfer;
 use hush_net::{Activation, Features, Loss, NetConfig, PatchMlpConfig, UNetConfig, UNetKind};
 use hush_train::{
-    Augment, EpochRow, LossRow, OptimizerConfig, Schedule, TrainConfig, TrainError, TrainSample, plot_losses,
-    read_train_state, train,
+    Augment, EpochRow, LossRow, OptimizerConfig, Schedule, TrainConfig, TrainError, TrainSample, decode_samples, fnv1a,
+    plot_losses, read_train_state, round_trip, train,
 };
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
@@ -293,29 +293,79 @@ fn device(name: &str) -> Result<candle_core::Device> {
     }
 }
 
-/// The samples of one split at the configured spp, named `scene_view@spp`.
+/// The samples of one split at the configured spp, named `scene_view@spp`: from the split's f16 cache
+/// beside the dataset (`DATASET/cache/`) when it is intact and was made from this manifest, feature set,
+/// transfer and spp; otherwise prepared from the EXR files and cached for the next run.
 fn load_split(cfg: &RunConfig, manifest: &Manifest, split: Split) -> Result<(Vec<TrainSample>, Vec<String>)> {
     let features = &cfg.train.features;
-    let (mut samples, mut names) = (Vec::new(), Vec::new());
-    for view in manifest.split(split) {
-        for record in view.noisy.iter().filter(|r| cfg.spp.is_empty() || cfg.spp.contains(&r.spp)) {
-            let images = load_view(&cfg.dataset, view, record.spp)?;
+    let records: Vec<_> = manifest
+        .split(split)
+        .flat_map(|view| {
+            view.noisy.iter().filter(|r| cfg.spp.is_empty() || cfg.spp.contains(&r.spp)).map(move |r| (view, r.spp))
+        })
+        .collect();
+    let names: Vec<String> =
+        records.iter().map(|(view, spp)| format!("{}_{}@{spp}spp", view.scene, view.view)).collect();
+    let manifest_hash = fnv1a(&serde_json::to_vec(manifest)?);
+    let key = format!(
+        "manifest {manifest_hash:016x}, features {features}, transfer {:?}, {split:?} split, samples {}",
+        Transfer::Pu,
+        names.join(" ")
+    );
+    let path = cfg.dataset.join("cache").join(format!("{split:?}-{:016x}.f16", fnv1a(key.as_bytes())).to_lowercase());
+    let samples = cached_samples(&path, &key, || {
+        let mut samples = Vec::new();
+        for &(view, spp) in &records {
+            let images = load_view(&cfg.dataset, view, spp)?;
             let aux: Vec<&Image> = features.aux.iter().map(|&f| aux_of(&images, f)).collect();
-            if split == Split::Train && images.color.width.min(images.color.height) < cfg.train.crop {
+            samples.push(TrainSample::from_linear(features, Transfer::Pu, &images.color, &aux, &images.reference)?);
+        }
+        Ok(samples)
+    })?;
+    if split == Split::Train {
+        for (s, name) in samples.iter().zip(&names) {
+            if s.input.width.min(s.input.height) < cfg.train.crop {
                 bail!(
-                    "{}_{} is {}×{}, smaller than --crop {}: use a smaller crop or a larger dataset --size",
-                    view.scene,
-                    view.view,
-                    images.color.width,
-                    images.color.height,
+                    "{name} is {}×{}, smaller than --crop {}: use a smaller crop or a larger dataset --size",
+                    s.input.width,
+                    s.input.height,
                     cfg.train.crop
                 );
             }
-            samples.push(TrainSample::from_linear(features, Transfer::Pu, &images.color, &aux, &images.reference)?);
-            names.push(format!("{}_{}@{}spp", view.scene, view.view, record.spp));
         }
     }
     Ok((samples, names))
+}
+
+/// Prepared samples from the cache file `path` if it holds intact samples of `key`; otherwise from `build`,
+/// written to `path` (atomically) for the next run. Either way the samples are what the cache gives back
+/// (values rounded to f16), so a run trains on the same data whether its cache was built or read. A cache
+/// that cannot be written (a read-only dataset) is a warning.
+fn cached_samples(
+    path: &Path,
+    key: &str,
+    build: impl FnOnce() -> Result<Vec<TrainSample>>,
+) -> Result<Vec<TrainSample>> {
+    match std::fs::read(path) {
+        Ok(bytes) => match decode_samples(&bytes, key) {
+            Ok(samples) => return Ok(samples),
+            Err(e) => eprintln!("warning: {}: {e}; preparing the samples again", path.display()),
+        },
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+        Err(e) => eprintln!("warning: cannot read {}: {e}; preparing the samples again", path.display()),
+    }
+    let samples = build()?;
+    let (samples, bytes) = round_trip(key, &samples)?;
+    let written = match path.parent() {
+        Some(dir) => std::fs::create_dir_all(dir)
+            .with_context(|| format!("creating {}", dir.display()))
+            .and_then(|()| write_file(path, &bytes)),
+        None => Ok(()),
+    };
+    if let Err(e) = written {
+        eprintln!("warning: the sample cache is not saved ({e:#}); the next run prepares the samples again");
+    }
+    Ok(samples)
 }
 
 fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
@@ -446,8 +496,10 @@ pub fn run(args: TrainArgs) -> Result<()> {
         bail!("{} has no training images at spp {spp:?}", dataset.display());
     }
     let cfg = resolve(&args, base, train_images)?;
+    let loading = std::time::Instant::now();
     let (samples, names) = load_split(&cfg, &manifest, Split::Train)?;
     let (test, _) = load_split(&cfg, &manifest, Split::Test)?;
+    let load_seconds = loading.elapsed().as_secs_f64();
 
     let checkpoints = out.join("checkpoints");
     let last = checkpoints.join("last.safetensors");
@@ -486,7 +538,8 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let t = &cfg.train;
     let epochs = t.steps.div_ceil(t.epoch_steps);
     eprintln!(
-        "training on {} images, testing on {}, with {}: {} steps = {epochs} epochs of {} steps",
+        "training on {} images, testing on {} (ready in {load_seconds:.2} s), with {}: {} steps = {epochs} epochs of \
+         {} steps",
         samples.len(),
         test.len(),
         t.features,
@@ -553,6 +606,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         "final_loss": log.last().map(|r| r.loss),
         "best": metrics.iter().rev().find(|r| r.best).map(|r| serde_json::json!({"epoch": r.epoch, "test_loss": r.test_loss})),
         "threads": std::env::var("RAYON_NUM_THREADS").ok(),
+        "load_seconds": load_seconds,
     });
     write_file(&out.join("summary.json"), serde_json::to_string_pretty(&summary)?.as_bytes())?;
     let first = log.first().map(|r| r.loss).unwrap_or(f64::NAN);
@@ -602,4 +656,60 @@ fn name_batch(batch: &str, names: &[String]) -> String {
         })
         .collect::<Vec<_>>()
         .join(", ")
+}
+
+#[cfg(test)]
+mod tests {
+    use std::cell::Cell;
+
+    use hush_dataset::Image;
+    use hush_train::TrainSample;
+
+    use super::cached_samples;
+
+    fn samples(value: f32) -> Vec<TrainSample> {
+        let input = Image::from_fn(4, 4, 9, |x, y, c| value + 0.01 * (x + 2 * y + c) as f32);
+        let target = Image::from_fn(4, 4, 3, |x, _, _| value + 0.1 * x as f32);
+        vec![TrainSample { input, target }]
+    }
+
+    /// A missing, stale or damaged cache is rebuilt and rewritten; an intact one is read without preparing
+    /// anything; a run gets the same values either way.
+    #[test]
+    fn the_sample_cache_is_rebuilt_unless_intact() {
+        let dir = std::env::temp_dir().join(format!("hush-sample-cache-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let path = dir.join("cache").join("train.f16");
+        let builds = Cell::new(0);
+        let load = |key: &str, value: f32| {
+            cached_samples(&path, key, || {
+                builds.set(builds.get() + 1);
+                Ok(samples(value))
+            })
+            .unwrap()
+        };
+        let fresh = load("a", 0.25);
+        assert_eq!(builds.get(), 1);
+        assert!(path.is_file(), "the cache is written");
+        assert_eq!(load("a", 0.25), fresh, "read back: the same values");
+        assert_eq!(builds.get(), 1, "an intact cache is trusted");
+
+        // Damaged (one byte changed), then cut short: prepared again, not trusted.
+        let mut bytes = std::fs::read(&path).unwrap();
+        bytes[40] ^= 1;
+        std::fs::write(&path, &bytes).unwrap();
+        assert_eq!(load("a", 0.25), fresh);
+        assert_eq!(builds.get(), 2);
+        std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
+        assert_eq!(load("a", 0.25), fresh);
+        assert_eq!(builds.get(), 3);
+        assert_eq!(load("a", 0.25), fresh);
+        assert_eq!(builds.get(), 3, "the rebuilt cache is intact again");
+
+        // Another key (the dataset or the settings changed): the new data, not the cached one.
+        let other = load("b", 0.5);
+        assert_eq!(builds.get(), 4);
+        assert_ne!(other, fresh);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

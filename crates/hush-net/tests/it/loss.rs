@@ -262,6 +262,38 @@ fn gradients_are_finite_on_extreme_inputs() -> Result<()> {
     Ok(())
 }
 
+/// Only a network's output goes below 0 (targets are in the transfer's [0, 1]). A negated image is not
+/// similar: with the luminance term unclamped, its negative luminance times its negative contrast-structure
+/// made SSIM(−y, y) ≈ 1, an optimum that drove a channel of training runs below 0 for good.
+#[test]
+fn a_negated_image_is_not_similar() -> Result<()> {
+    let y = det_tensor(&[1, 3, 32, 32], 0.2, 0.8, 21)?;
+    let s = scalar(&ssim(&y.neg()?, &y)?);
+    // The negation's local luminance term is C1 / (μ1² + μ2² + C1) ≈ 4e-4 here; 0.01 is far from the ≈ 1 of
+    // the unclamped formula.
+    assert!(s < 0.01, "SSIM(-y, y) = {s}");
+    Ok(())
+}
+
+/// A channel below 0 that follows the target's structure (what a network with a negative output bias gives
+/// at initialization) gets an MS-SSIM gradient that raises it. Unclamped, its coarsest scale's SSIM was
+/// negative, MS-SSIM's clamp made the channel's product 0 with a zero gradient, and the channel stayed dead
+/// (the collapsed `ann` and `msssim` runs of the small sweep).
+#[test]
+fn ms_ssim_raises_a_channel_below_zero() -> Result<()> {
+    // 64² as the training crops: 3 scales.
+    let y = det_tensor(&[1, 1, 64, 64], 0.2, 0.8, 22)?;
+    let var = Var::from_tensor(&y.affine(0.5, -0.5)?)?;
+    for l in [Loss::MsSsim, Loss::Mix] {
+        let grads = l.compute(var.as_tensor(), &y)?.backward()?;
+        let g = values(grads.get(&var).expect("gradient"));
+        let sum: f64 = g.iter().map(|&v| v as f64).sum();
+        // The loss falls as the output rises: the summed gradient is negative (exactly 0 before the fix).
+        assert!(sum < 0.0, "{l:?}: summed gradient {sum}");
+    }
+    Ok(())
+}
+
 /// The analytic gradient of SSIM (custom f32 filter with its hand-written backward) matches the f64 path
 /// (candle's conv2d) and central finite differences.
 #[test]

@@ -1,5 +1,6 @@
 //! hush-train's integration tests: tiny synthetic denoising problems, seconds in total.
 
+mod cache;
 mod optim;
 mod schedule;
 
@@ -110,6 +111,33 @@ fn same_seed_same_losses() {
     let mut other = cfg.clone();
     other.seed = 12;
     assert_ne!(a, losses(&run(&other, &samples).unwrap()));
+}
+
+/// `hush train`'s defaults (color + albedo + normal, `unet` at width 0.25, batch 4, 64² crops, L_MIX, Adam at
+/// 1e-3) run with every core the machine has (2 on CI; candle's GEMM and convolutions split their work
+/// across them): two runs give bit-identical losses and weights. Measured by hand as well with
+/// RAYON_NUM_THREADS=1 against 2, which also agree bit for bit.
+#[test]
+fn same_seed_same_losses_at_the_default_configuration() {
+    let features = Features::parse("color,albedo,normal").unwrap();
+    let samples: Vec<TrainSample> = (0..2)
+        .map(|k| {
+            let target =
+                Image::from_fn(64, 64, 3, |x, y, c| 0.1 + 0.8 * ((x * (c + 1) + y * (k + 2)) % 64) as f32 / 64.0);
+            let mut input = Image::from_fn(64, 64, 9, |x, y, c| target.data[(y * 64 + x) * 3 + c % 3]);
+            for (i, v) in input.data.iter_mut().enumerate() {
+                *v = (*v + 0.3 * noise(i, k as u64)).clamp(0.0, 1.0);
+            }
+            TrainSample { input, target }
+        })
+        .collect();
+    let mut cfg = TrainConfig::thesis(features);
+    cfg.net = UNetConfig { kind: UNetKind::Unet, in_channels: 9, out_channels: 3, width: 0.25 };
+    (cfg.steps, cfg.crop, cfg.lr, cfg.eval_every) = (2, 64, 1e-3, 0);
+    let a = run(&cfg, &samples).unwrap();
+    let b = run(&cfg, &samples).unwrap();
+    assert_eq!(losses(&a), losses(&b));
+    assert!(a.weights == b.weights, "the weights after two identical runs differ");
 }
 
 #[test]

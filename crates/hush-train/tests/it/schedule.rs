@@ -34,7 +34,7 @@ fn lambda_custom_factors() {
 #[test]
 fn lambda_step_decay() {
     let s = Schedule::Step { every: 3, gamma: 0.1 };
-    let want: Vec<f64> = (1..=10).map(|e| BASE * 0.1f64.powi(((e - 1) / 3) as i32)).collect();
+    let want: Vec<f64> = (1..=10).map(|e| BASE * 0.1f64.powi((e - 1) / 3)).collect();
     assert_close(&curve(&s, 10), &want);
     assert_eq!(curve(&s, 10)[..3], [BASE; 3]);
 }
