@@ -312,6 +312,12 @@ fn matches_mitsuba_plastic() {
     compare_with_mitsuba("plastic", 256);
 }
 
+/// Beckmann microfacets (Mitsuba's default distribution): a rough conductor and a rough plastic.
+#[test]
+fn matches_mitsuba_beckmann() {
+    compare_with_mitsuba("beckmann", 256);
+}
+
 /// An 8-bit sRGB checkerboard (bilinear, repeat) as the diffuse reflectance of the floor and
 /// the back wall: UVs of Mitsuba's `rectangle`, sRGB decoding and the bilinear lookup.
 #[test]
