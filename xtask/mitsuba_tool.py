@@ -4,6 +4,7 @@
 
   check   render a scene at low spp and compare its mean with a reference render
   bench   M samples per CPU-second and relMSE x CPU-seconds of Mitsuba's llvm_ad_rgb variant
+          (--width/--height/--max-depth set as hush's flags do, see load_scene)
   relmse  relMSE of any RGB EXR (e.g. hush's render) against a reference EXR
 
 CPU time is the process's (all threads, user + system) from resource.getrusage. `bench` first
@@ -78,6 +79,53 @@ def integrator_max_depth(path):
     return None if node is None else int(node.get("value"))
 
 
+def load_scene(mi, path, width=None, height=None, max_depth=None):
+    """The scene file as hush renders it with `--width`, `--height` and `--max-depth`: those set on the
+    film and on a `path` integrator (the scene's own integrator, e.g. a path guider, is replaced), the
+    reconstruction filter set to hush's box, and film options Mitsuba 3 no longer has (Mitsuba 0.6's
+    `highQualityEdges`) dropped. Returns the scene and the list of edits made (none without overrides)."""
+    if width is None and height is None and max_depth is None:
+        return mi.load_file(path), []
+    import xml.etree.ElementTree as ET
+
+    root = ET.parse(path).getroot()
+    edits = []
+    film = root.find("sensor/film")
+    if film is None:
+        sys.exit(f"{path}: no <sensor><film> to set the image size on")
+    for name, value in (("width", width), ("height", height)):
+        if value is not None:
+            node = film.find(f"integer[@name='{name}']")
+            if node is None:
+                node = ET.SubElement(film, "integer", name=name)
+            node.set("value", str(value))
+            edits.append(f"film {name} {value}")
+    for node in list(film):
+        if node.get("name") in ("highQualityEdges", "high_quality_edges"):
+            film.remove(node)
+            edits.append(f"dropped film {node.get('name')} (not in Mitsuba 3)")
+        elif node.tag == "rfilter" and node.get("type") != "box":
+            edits.append(f"rfilter {node.get('type')} -> box (hush's)")
+            node.attrib = {"type": "box"}
+            node[:] = []
+    integrator = root.find("integrator")
+    if integrator is None:
+        integrator = ET.Element("integrator", type="path")
+        root.insert(0, integrator)
+    if integrator.get("type") != "path":
+        edits.append(f"integrator {integrator.get('type')} -> path")
+        integrator.attrib = {"type": "path"}
+        integrator[:] = []
+    if max_depth is not None:
+        node = next((n for n in integrator if n.get("name") in ("max_depth", "maxDepth")), None)
+        if node is None:
+            node = ET.SubElement(integrator, "integer", name="max_depth")
+        node.set("value", str(max_depth))
+        edits.append(f"max_depth {max_depth}")
+    mi.file_resolver().prepend(os.path.dirname(os.path.abspath(path)))
+    return mi.load_string(ET.tostring(root, encoding="unicode")), edits
+
+
 def cmd_check(a):
     dr, mi = setup_mitsuba(a.threads)
     scene = mi.load_file(a.scene)
@@ -104,11 +152,11 @@ def cmd_bench(a):
     dr, mi = setup_mitsuba(a.threads)
     c0 = cpu_seconds()
     import_cpu = c0 - c_start
-    scene = mi.load_file(a.scene)
+    scene, edits = load_scene(mi, a.scene, a.width, a.height, a.max_depth)
     load_cpu = cpu_seconds() - c0
     film = scene.sensors()[0].film()
     w, h = film.size()
-    max_depth = integrator_max_depth(a.scene)
+    max_depth = a.max_depth if a.max_depth is not None else integrator_max_depth(a.scene)
 
     # Cold render: tracing, JIT compilation, then the render itself.
     c0, w0 = cpu_seconds(), time.perf_counter()
@@ -135,6 +183,7 @@ def cmd_bench(a):
         "height": h,
         "spp": a.spp,
         "max_depth": max_depth,
+        "scene_edits": edits,
         "samples": samples,
         "cpu_seconds": cpu,
         "wall_seconds": wall,
@@ -189,6 +238,9 @@ def main():
     b.add_argument("--spp", type=int, default=64)
     b.add_argument("--threads", type=int, default=2)
     b.add_argument("--seed", type=int, default=1)
+    b.add_argument("--width", type=int, help="film width (as hush's --width)")
+    b.add_argument("--height", type=int, help="film height (as hush's --height)")
+    b.add_argument("--max-depth", type=int, help="the path integrator's max_depth (as hush's --max-depth)")
     b.add_argument("--ref")
     b.add_argument("--out")
     b.add_argument("--stats")

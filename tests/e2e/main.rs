@@ -133,6 +133,24 @@ fn render_writes_every_layer() {
     assert_eq!(stats["paths"].as_f64(), Some(24.0 * 16.0 * 2.0));
 }
 
+/// `--time-limit` shorter than one pass renders one pass and records the spp it reached; the
+/// image size gives 16 samples per pass, capped here by `--spp 5`.
+#[test]
+fn time_limit_records_the_spp_reached() {
+    let dir = scratch("time-limit");
+    let stats = dir.join("stats.json");
+    let (scene, out) = (cbox(), dir.join("o.exr"));
+    let common = ["render", s(&scene), "--width", "8", "--height", "8", "--out", s(&out), "--stats", s(&stats)];
+    let read = || -> serde_json::Value { serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap() };
+    let err = expect_success(&[&common[..], &["--time-limit", "0.000001"]].concat());
+    assert!(err.contains("at 16 spp (1 pass)"), "{err}");
+    assert_eq!((read()["spp"].as_u64(), read()["passes"].as_u64()), (Some(16), Some(1)));
+    expect_success(&[&common[..], &["--time-limit", "3600", "--spp", "5"]].concat());
+    assert_eq!((read()["spp"].as_u64(), read()["paths"].as_f64()), (Some(5), Some(8.0 * 8.0 * 5.0)));
+    let err = expect_error(&[&common[..], &["--time-limit", "0"]].concat());
+    assert!(err.contains("--time-limit must be a positive number of seconds"), "{err}");
+}
+
 /// The whole pipeline on a 32² Cornell box: dataset (re-run resumes without re-rendering),
 /// train, denoise (with a clear error for a missing feature), eval.
 #[test]

@@ -1,13 +1,20 @@
-//! `cargo xtask bench render`: hush against Mitsuba 3 on the Cornell box, in one run.
+//! `cargo xtask bench render`: hush against Mitsuba 3, and hush's specialized kernel against its
+//! generic one, on the Cornell box, veach-mis and living-room, in one run.
 //!
-//! Both render `data/scenes/cbox/scene.xml` at 512², max_depth 8, the same spp (64 unless
-//! `--spp`). Reported per renderer: M paths (= samples) per CPU-second, and relMSE × CPU-seconds
-//! against Mitsuba's independent 1792-spp render (`../shared/reference/mitsuba-cbox`). CPU-seconds
-//! count every thread of the process: hush's from its own stats (after the scene load and the GPU
-//! set-up), Mitsuba's (`llvm_ad_rgb`, 2 threads) from getrusage around a second render whose
-//! kernels come from Dr.Jit's cache (see `xtask/mitsuba_tool.py`). relMSE is computed by Python in
-//! Mitsuba's venv (xtask reads no EXR). Without Mitsuba the hush half still runs and Mitsuba is
-//! reported as skipped with the command that installs it.
+//! Each scene is rendered from its own file by both renderers at the same size, max_depth 8 and
+//! spp, chosen per scene (`SCENES`; `--spp N` sets every scene's) so the default run takes
+//! minutes: hush (specialized kernel, then `--generic`) and Mitsuba 3 (`llvm_ad_rgb`, 2 threads).
+//! Mitsuba gets the size and depth the way hush's flags set them, with hush's box filter and the
+//! `path` integrator (`load_scene` in `xtask/mitsuba_tool.py`, which lists its edits in the JSON).
+//! Reported per renderer: M paths (= samples) per CPU-second and, where an independent reference
+//! exists (the box: Mitsuba's 1792-spp render in `../shared/reference/mitsuba-cbox`),
+//! relMSE × CPU-seconds. CPU-seconds count every thread of the process: hush's from its own stats
+//! (after the scene load and the GPU set-up, with the upload and BVH build), Mitsuba's from
+//! getrusage around a second render whose kernels come from Dr.Jit's cache (see
+//! `xtask/mitsuba_tool.py`; its scene load and BVH build are not counted). relMSE is computed by
+//! Python in Mitsuba's venv (xtask reads no EXR). Without Mitsuba the hush half still runs and
+//! Mitsuba is reported as skipped with the command that installs it; without `../shared`, only
+//! the box runs.
 
 use std::process::Command;
 
@@ -23,11 +30,13 @@ pub fn run(args: &[String]) -> Result<()> {
         Some("dataset") => dataset(&args[1..]),
         Some("net") => crate::bench_net::net(&args[1..]),
         Some("train") => crate::bench_net::train(&args[1..]),
-        _ => Err("usage: cargo xtask bench render [--release] [--spp N] [--no-mitsuba] [--no-build]\n       \
+        _ => Err(
+            "usage: cargo xtask bench render [--release] [--spp N (every scene)] [--no-mitsuba] [--no-build]\n       \
                   cargo xtask bench dataset [--release] [--size N] [--views N]\n       \
                   cargo xtask bench net [--release]\n       \
                   cargo xtask bench train [--release] [--steps N]"
-            .into()),
+                .into(),
+        ),
     }
 }
 
@@ -45,8 +54,53 @@ fn ratio(a: &serde_json::Value, b: &serde_json::Value) -> serde_json::Value {
     }
 }
 
-/// The box at 512², max_depth 8.
+/// A scene of `bench render`: where it is, and the settings both renderers use.
+struct BenchScene {
+    name: &'static str,
+    /// Relative to the repository root, or to `../shared` with `shared`.
+    path: &'static str,
+    shared: bool,
+    width: u32,
+    height: u32,
+    spp: u32,
+    /// Why this scene and these settings.
+    note: &'static str,
+}
+
+/// The scenes, sized so that hush takes about a minute or less on each under light load on 2 cores.
+const SCENES: [BenchScene; 3] = [
+    BenchScene {
+        name: "cbox",
+        path: "data/scenes/cbox/scene.xml",
+        shared: false,
+        width: 512,
+        height: 512,
+        spp: 64,
+        note: "Mitsuba 3's Cornell box, 36 triangles: the issue's reference setting",
+    },
+    BenchScene {
+        name: "veach-mis",
+        path: "scenes/veach-mis/scene.xml",
+        shared: true,
+        width: 384,
+        height: 216,
+        spp: 32,
+        note: "12k triangles, rough conductors, three sphere lights from 7.6 to 3040 W/sr/m²",
+    },
+    BenchScene {
+        name: "living-room",
+        path: "scenes/living-room/scene.xml",
+        shared: true,
+        width: 384,
+        height: 216,
+        spp: 8,
+        note: "143k triangles (BVH-bound), lit only by an environment map",
+    },
+];
+
+/// Every scene at its settings, max_depth 8; `render.json` holds one entry per scene.
 fn render(args: &[String]) -> Result<()> {
+    const MAX_DEPTH: u32 = 8;
     ensure_vulkan()?;
     let hush = if args.iter().any(|a| a == "--no-build") {
         // The binary as last built (e.g. while the workspace is mid-edit).
@@ -54,101 +108,137 @@ fn render(args: &[String]) -> Result<()> {
     } else {
         build_hush(release(args))?
     };
-    let spp = spp_arg(args, 64)?;
+    let spp_override = match args.iter().position(|a| a == "--spp") {
+        Some(_) => Some(spp_arg(args, 0)?),
+        None => None,
+    };
+    let skip_mitsuba = args.iter().any(|a| a == "--no-mitsuba");
     let dir = target_dir().join("bench");
-    let scene = project_root().join("data/scenes/cbox/scene.xml");
-    let reference = mitsuba::cbox_reference();
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
     let load_before = load_average();
-
-    // hush.
-    let stats = dir.join("render-hush-cbox.json");
-    let hush_exr = dir.join("render-cbox.exr");
-    spawn(
-        Command::new(&hush)
-            .args(["render"])
-            .arg(&scene)
-            .args(["--spp", &spp.to_string(), "--width", "512", "--height", "512", "--max-depth", "8", "--out"])
-            .arg(&hush_exr)
-            .arg("--stats")
-            .arg(&stats),
-    )?;
-    let s = read_json(&stats)?;
-    let mut hush_result = serde_json::json!({
-        "mpaths_per_cpu_second": s["mpaths_per_cpu_second"],
-        "mpaths_per_second": s["mpaths_per_second"],
-        "cpu_seconds": s["cpu_seconds"],
-        "wall_seconds": s["wall_seconds"],
-        "adapter": s["adapter"],
-    });
-    let load_between = load_average();
-
-    // Mitsuba, and relMSE for both (both need Mitsuba's venv).
-    let skip = args.iter().any(|a| a == "--no-mitsuba");
-    let mitsuba_result = match mitsuba::python() {
-        _ if skip => serde_json::json!({ "skipped": "--no-mitsuba" }),
-        Err(e) => {
-            eprintln!("xtask: Mitsuba skipped: {e}");
-            hush_result["relmse"] = format!("skipped: computed in Mitsuba's venv ({})", mitsuba::SETUP).into();
-            serde_json::json!({ "skipped": e, "install": mitsuba::SETUP })
-        }
-        Ok(mut py) => {
-            if let Some(reference) = &reference {
-                let text = output(
-                    mitsuba::python()?
-                        .arg(mitsuba::helper())
-                        .args(["relmse", "--image"])
-                        .arg(&hush_exr)
-                        .arg("--ref")
-                        .arg(reference),
-                )?;
-                let r: serde_json::Value = serde_json::from_str(text.trim().lines().last().unwrap_or_default())
-                    .map_err(|e| format!("relmse printed no JSON: {e}"))?;
-                let relmse = r["relmse"].as_f64();
-                let cpu = s["cpu_seconds"].as_f64();
-                hush_result["relmse"] = r["relmse"].clone();
-                hush_result["nonfinite_values"] = r["nonfinite_values"].clone();
-                hush_result["relmse_x_cpu_seconds"] = match (relmse, cpu) {
-                    (Some(r), Some(c)) => serde_json::json!(r * c),
-                    _ => serde_json::Value::Null,
-                };
+    let mut results = Vec::new();
+    for sc in &SCENES {
+        let scene = match (sc.shared, mitsuba::shared_dir()) {
+            (false, _) => project_root().join(sc.path),
+            (true, Some(shared)) => shared.join(sc.path),
+            (true, None) => {
+                eprintln!("xtask: {} skipped: ../shared (beside the repository) is missing", sc.name);
+                results.push(serde_json::json!({ "scene": sc.name, "skipped": "../shared is missing" }));
+                continue;
             }
-            let mstats = dir.join("render-mitsuba-cbox.json");
-            py.arg(mitsuba::helper())
-                .arg("bench")
-                .arg("--scene")
-                .arg(&scene)
-                .args(["--spp", &spp.to_string(), "--threads", "2", "--out"])
-                .arg(dir.join("render-mitsuba-cbox.exr"))
-                .arg("--stats")
-                .arg(&mstats);
-            if let Some(reference) = &reference {
-                py.arg("--ref").arg(reference);
+        };
+        let spp = spp_override.unwrap_or(sc.spp);
+        let reference = if sc.name == "cbox" { mitsuba::cbox_reference() } else { None };
+        let size = [sc.width.to_string(), sc.height.to_string(), MAX_DEPTH.to_string(), spp.to_string()];
+        let load_start = load_average();
+
+        // hush, specialized then generic.
+        let mut hush_runs = Vec::new();
+        for generic in [false, true] {
+            let kind = if generic { "generic" } else { "specialized" };
+            let stats = dir.join(format!("render-hush-{}-{kind}.json", sc.name));
+            let exr = dir.join(format!("render-hush-{}-{kind}.exr", sc.name));
+            let mut cmd = Command::new(&hush);
+            cmd.arg("render").arg(&scene).args(["--spp", &size[3], "--width", &size[0], "--height", &size[1]]);
+            cmd.args(["--max-depth", &size[2], "--out"]).arg(&exr).arg("--stats").arg(&stats);
+            if generic {
+                cmd.arg("--generic");
             }
-            py.stdout(std::process::Stdio::null());
-            spawn(&mut py)?;
-            read_json(&mstats)?
+            spawn(&mut cmd)?;
+            let s = read_json(&stats)?;
+            hush_runs.push((
+                exr,
+                serde_json::json!({
+                    "mpaths_per_cpu_second": s["mpaths_per_cpu_second"],
+                    "mpaths_per_second": s["mpaths_per_second"],
+                    "cpu_seconds": s["cpu_seconds"],
+                    "wall_seconds": s["wall_seconds"],
+                    "non_finite_values": s["non_finite_values"],
+                    "adapter": s["adapter"],
+                }),
+            ));
         }
-    };
-    if reference.is_none() {
-        hush_result["relmse"] = "skipped: ../shared/reference/mitsuba-cbox/mitsuba_1792spp.exr not found".into();
+        let (hush_exr, mut hush_result) = hush_runs.remove(0);
+        let generic_result = hush_runs.remove(0).1;
+        let load_between = load_average();
+
+        // Mitsuba, and relMSE for hush (both need Mitsuba's venv).
+        let mitsuba_result = match mitsuba::python() {
+            _ if skip_mitsuba => serde_json::json!({ "skipped": "--no-mitsuba" }),
+            Err(e) => {
+                eprintln!("xtask: Mitsuba skipped: {e}");
+                serde_json::json!({ "skipped": e, "install": mitsuba::SETUP })
+            }
+            Ok(mut py) => {
+                if let Some(reference) = &reference {
+                    let text = output(
+                        mitsuba::python()?
+                            .arg(mitsuba::helper())
+                            .args(["relmse", "--image"])
+                            .arg(&hush_exr)
+                            .arg("--ref")
+                            .arg(reference),
+                    )?;
+                    let r: serde_json::Value = serde_json::from_str(text.trim().lines().last().unwrap_or_default())
+                        .map_err(|e| format!("relmse printed no JSON: {e}"))?;
+                    hush_result["relmse"] = r["relmse"].clone();
+                    hush_result["relmse_x_cpu_seconds"] =
+                        match (r["relmse"].as_f64(), hush_result["cpu_seconds"].as_f64()) {
+                            (Some(r), Some(c)) => serde_json::json!(r * c),
+                            _ => serde_json::Value::Null,
+                        };
+                }
+                let mstats = dir.join(format!("render-mitsuba-{}.json", sc.name));
+                py.arg(mitsuba::helper()).arg("bench").arg("--scene").arg(&scene);
+                py.args(["--spp", &size[3], "--width", &size[0], "--height", &size[1], "--max-depth", &size[2]]);
+                py.args(["--threads", "2", "--out"]).arg(dir.join(format!("render-mitsuba-{}.exr", sc.name)));
+                py.arg("--stats").arg(&mstats);
+                if let Some(reference) = &reference {
+                    py.arg("--ref").arg(reference);
+                }
+                py.stdout(std::process::Stdio::null());
+                spawn(&mut py)?;
+                read_json(&mstats)?
+            }
+        };
+        if hush_result.get("relmse").is_none() {
+            hush_result["relmse"] = match &reference {
+                None => "no independent reference for this scene".into(),
+                Some(_) => format!("skipped: computed in Mitsuba's venv ({})", mitsuba::SETUP).into(),
+            };
+        }
+        results.push(serde_json::json!({
+            "scene": sc.name,
+            "file": scene.display().to_string(),
+            "note": sc.note,
+            "width": sc.width, "height": sc.height, "max_depth": MAX_DEPTH, "spp": spp,
+            "reference": reference.as_ref().map(|p| p.display().to_string()),
+            "load_average": { "before": load_start, "between": load_between, "after": load_average() },
+            "hush": hush_result,
+            "hush_generic": generic_result,
+            "mitsuba": mitsuba_result,
+            "hush_over_mitsuba": {
+                "mpaths_per_cpu_second":
+                    ratio(&hush_result["mpaths_per_cpu_second"], &mitsuba_result["msamples_per_cpu_second"]),
+                "relmse_x_cpu_seconds":
+                    ratio(&hush_result["relmse_x_cpu_seconds"], &mitsuba_result["relmse_x_cpu_seconds"]),
+            },
+            "specialized_over_generic": {
+                "mpaths_per_cpu_second":
+                    ratio(&hush_result["mpaths_per_cpu_second"], &generic_result["mpaths_per_cpu_second"]),
+                "mpaths_per_second": ratio(&hush_result["mpaths_per_second"], &generic_result["mpaths_per_second"]),
+            },
+        }));
     }
 
-    let hush_over_mitsuba = serde_json::json!({
-        "mpaths_per_cpu_second": ratio(&hush_result["mpaths_per_cpu_second"], &mitsuba_result["msamples_per_cpu_second"]),
-        "relmse_x_cpu_seconds": ratio(&hush_result["relmse_x_cpu_seconds"], &mitsuba_result["relmse_x_cpu_seconds"]),
-        "note": "paths per CPU-second: higher is better for hush (goal ≥ 1); relMSE × CPU-seconds: lower is better (goal ≤ 1)",
-    });
     let result = serde_json::json!({
         "benchmark": "render",
-        "scene": "cbox (Mitsuba 3 Cornell box)",
-        "width": 512, "height": 512, "max_depth": 8, "spp": spp,
-        "reference": reference.as_ref().map(|p| p.display().to_string()),
         "relmse": "mean over pixels and R, G, B of (x − ref)² / (ref² + 1e-2)",
-        "load_average": { "before": load_before, "between": load_between, "after": load_average() },
-        "hush": hush_result,
-        "mitsuba": mitsuba_result,
-        "hush_over_mitsuba": hush_over_mitsuba,
+        "note": "hush_over_mitsuba: paths per CPU-second, higher is better for hush (goal ≥ 1); relMSE × CPU-seconds, \
+                 lower is better (goal ≤ 1). specialized_over_generic: > 1 means the kernel specialized to the scene \
+                 is faster. Ratios within one scene are measured minutes apart: compare them with the load averages.",
+        "load_average": { "before": load_before, "after": load_average() },
+        "scenes": results,
     });
     let out = dir.join("render.json");
     write_json(&out, &result)?;

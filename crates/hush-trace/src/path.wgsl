@@ -277,169 +277,187 @@ fn features(m: Material) -> mat2x3<f32> {
     return mat2x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0));
 }
 
-fn trace(pixel: vec2<u32>) -> Sample {
-    var out = Sample(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
+// One path's state between bounces.
+struct PathState {
+    o: vec3<f32>,
+    d: vec3<f32>,
+    throughput: vec3<f32>,
+    // Solid-angle pdf of the BSDF sample that produced `d`, and whether it was a delta lobe
+    // (the camera ray counts as one: emitters it sees get full weight).
+    prev_pdf: f32,
+    prev_delta: bool,
+    features_done: bool,
+    depth: u32,
+    out: Sample,
+}
+
+// Seeds the random stream of (pixel, sample index, seed) and starts that sample's camera ray.
+fn start_path(pixel: vec2<u32>, pixel_index: u32, sample_index: u32) -> PathState {
+    rng_state = pcg(pixel_index ^ pcg(sample_index ^ pcg(params.seed_lo ^ pcg(params.seed_hi))));
     // Box filter: a uniform point inside the pixel. Row 0 is the top of the image.
     let fx = (f32(pixel.x) + rand()) / f32(params.width);
     let fy = (f32(pixel.y) + rand()) / f32(params.height);
-    var o = params.origin.xyz;
-    var d = normalize(params.forward.xyz + (2.0 * fx - 1.0) * params.right.xyz + (1.0 - 2.0 * fy) * params.up.xyz);
+    let d = normalize(params.forward.xyz + (2.0 * fx - 1.0) * params.right.xyz + (1.0 - 2.0 * fy) * params.up.xyz);
+    let zero = vec3<f32>(0.0);
+    return PathState(params.origin.xyz, d, vec3<f32>(1.0), 0.0, true, false, 0u, Sample(zero, zero, zero, zero, zero));
+}
 
-    var throughput = vec3<f32>(1.0);
-    // Solid-angle pdf of the BSDF sample that produced `d`, and whether it was a delta lobe
-    // (the camera ray counts as one: emitters it sees get full weight).
-    var prev_pdf = 0.0;
-    var prev_delta = true;
-    var features_done = false;
-    var depth = 0u;
-    loop {
-        let hit = intersect(o, d, T_MAX);
-        if hit.tri == NO_HIT {
-            // The environment, weighted against sampling it.
-            if HAS_ENV && env.kind != ENV_NONE {
-                var weight = 1.0;
-                if !prev_delta {
-                    weight = power_heuristic(prev_pdf, env.radiance.w * env_pdf(d));
-                }
-                out.radiance += throughput * env_eval(d) * weight;
-            }
-            break;
-        }
-        let tri = tris[hit.tri];
-        let p = o + d * hit.t;
-        let ng = normalize(cross(tri.e1.xyz, tri.e2.xyz));
-        let front = dot(ng, d) < 0.0;
-        let nr = normals[hit.tri];
-        var ns = ng;
-        if nr.n0.w > 0.5 {
-            let w = 1.0 - hit.u - hit.v;
-            ns = normalize(w * nr.n0.xyz + hit.u * nr.n1.xyz + hit.v * nr.n2.xyz);
-            // Keep the shading normal on the geometric front side.
-            if dot(ns, ng) < 0.0 {
-                ns = -ns;
-            }
-        }
-        var mat = materials[bitcast<u32>(tri.p0.w)];
-        let tex = bitcast<u32>(mat.e.x);
-        if HAS_TEXTURES && tex != NO_TEXTURE {
-            let w = 1.0 - hit.u - hit.v;
-            let uv = w * nr.uv01.xy + hit.u * nr.uv01.zw + hit.v * nr.uv2.xy;
-            mat.a = vec4<f32>(texture_lookup(tex, uv), mat.a.w);
-        }
-        let delta = mat_is_delta(mat);
-
-        if !features_done && !delta {
-            let f = features(mat);
-            out.diffuse = f[0];
-            out.specular = f[1];
-            out.albedo = min(f[0] + f[1], vec3<f32>(1.0));
-            out.normal = select(-ns, ns, front);
-            features_done = true;
-        }
-
-        // Emission reached by the camera or by BSDF sampling, weighted against light sampling.
-        if mat.emission.w > 0.5 && front {
+// Traces the path's next segment and shades its hit; false when the path has ended.
+fn bounce(st: ptr<function, PathState>) -> bool {
+    let o = (*st).o;
+    let d = (*st).d;
+    let throughput = (*st).throughput;
+    let prev_pdf = (*st).prev_pdf;
+    let prev_delta = (*st).prev_delta;
+    let depth = (*st).depth;
+    let hit = intersect(o, d, T_MAX);
+    if hit.tri == NO_HIT {
+        // The environment, weighted against sampling it.
+        if HAS_ENV && env.kind != ENV_NONE {
             var weight = 1.0;
             if !prev_delta {
-                let light_pdf = (1.0 - env.radiance.w) * tri.e1.w * hit.t * hit.t / dot(ng, -d);
-                weight = power_heuristic(prev_pdf, light_pdf);
+                weight = power_heuristic(prev_pdf, env.radiance.w * env_pdf(d));
             }
-            out.radiance += throughput * mat.emission.xyz * weight;
+            (*st).out.radiance += throughput * env_eval(d) * weight;
         }
-
-        let kind = mat_kind(mat);
-        let one_sided = (mat_flags(mat) & FLAG_TWO_SIDED) == 0u && kind != KIND_DIELECTRIC && kind != KIND_THIN_DIELECTRIC;
-        if depth + 1u >= params.max_depth || (one_sided && !front) {
-            break;
-        }
-        let frame = basis(ns);
-        let to_local = transpose(frame);
-        let wo = to_local * -d;
-
-        // Next-event estimation: the environment with probability env_radiance.w, otherwise
-        // a point on a triangle light picked by power.
-        let env_pick = select(0.0, env.radiance.w, HAS_ENV);
-        if (params.light_count > 0u || env_pick > 0.0) && !delta {
-            var wi = vec3<f32>(0.0);
-            var light_pdf = 0.0;
-            var radiance = vec3<f32>(0.0);
-            var lp = vec3<f32>(0.0);
-            var to_env = true;
-            if rand() < env_pick {
-                let es = env_sample(vec2<f32>(rand(), rand()));
-                wi = es.d;
-                light_pdf = env_pick * es.pdf;
-                radiance = es.radiance;
-            } else {
-                let light = lights[pick_light(rand())];
-                let lt = tris[light.tri];
-                var a = rand();
-                var b = rand();
-                if a + b > 1.0 {
-                    a = 1.0 - a;
-                    b = 1.0 - b;
-                }
-                lp = lt.p0.xyz + a * lt.e1.xyz + b * lt.e2.xyz;
-                to_env = false;
-                let lng = normalize(cross(lt.e1.xyz, lt.e2.xyz));
-                let to_light = lp - p;
-                let dist2 = dot(to_light, to_light);
-                wi = to_light / sqrt(dist2);
-                let cos_light = dot(lng, -wi);
-                if cos_light > 0.0 {
-                    light_pdf = (1.0 - env_pick) * lt.e1.w * dist2 / cos_light;
-                    radiance = materials[bitcast<u32>(lt.p0.w)].emission.xyz;
-                }
-            }
-            let wi_local = to_local * wi;
-            // The shading and geometric normals must agree on the side wi leaves from.
-            if light_pdf > 0.0 && dot(ng, wi) * wi_local.z > 0.0 {
-                let f = bsdf_eval(mat, wo, wi_local);
-                if any(f > vec3<f32>(0.0)) && any(radiance > vec3<f32>(0.0)) {
-                    let origin = offset_origin(p, ng, wi);
-                    // Shadow rays to a triangle light end just short of it.
-                    var shadow_d = wi;
-                    var t_max = T_MAX;
-                    if !to_env {
-                        shadow_d = normalize(lp - origin);
-                        t_max = length(lp - origin) * (1.0 - 1e-4);
-                    }
-                    if !occluded(origin, shadow_d, t_max) {
-                        let weight = power_heuristic(light_pdf, bsdf_pdf(mat, wo, wi_local));
-                        out.radiance += throughput * f * radiance * weight / light_pdf;
-                    }
-                }
-            }
-        }
-
-        // BSDF sampling.
-        let s = bsdf_sample(mat, wo, vec2<f32>(rand(), rand()), rand());
-        if !s.valid {
-            break;
-        }
-        let wi = frame * s.wi;
-        if dot(ng, wi) * s.wi.z <= 0.0 {
-            break;
-        }
-        throughput *= s.weight;
-        prev_pdf = s.pdf;
-        prev_delta = s.delta;
-        depth += 1u;
-
-        if depth >= RR_DEPTH {
-            let q = min(max(throughput.x, max(throughput.y, throughput.z)), 0.95);
-            if rand() >= q {
-                break;
-            }
-            throughput /= q;
-        }
-        if max(throughput.x, max(throughput.y, throughput.z)) <= 0.0 {
-            break;
-        }
-        o = offset_origin(p, ng, wi);
-        d = normalize(wi);
+        return false;
     }
-    return out;
+    let tri = tris[hit.tri];
+    let p = o + d * hit.t;
+    let ng = normalize(cross(tri.e1.xyz, tri.e2.xyz));
+    let front = dot(ng, d) < 0.0;
+    let nr = normals[hit.tri];
+    var ns = ng;
+    if nr.n0.w > 0.5 {
+        let w = 1.0 - hit.u - hit.v;
+        ns = normalize(w * nr.n0.xyz + hit.u * nr.n1.xyz + hit.v * nr.n2.xyz);
+        // Keep the shading normal on the geometric front side.
+        if dot(ns, ng) < 0.0 {
+            ns = -ns;
+        }
+    }
+    var mat = materials[bitcast<u32>(tri.p0.w)];
+    let tex = bitcast<u32>(mat.e.x);
+    if HAS_TEXTURES && tex != NO_TEXTURE {
+        let w = 1.0 - hit.u - hit.v;
+        let uv = w * nr.uv01.xy + hit.u * nr.uv01.zw + hit.v * nr.uv2.xy;
+        mat.a = vec4<f32>(texture_lookup(tex, uv), mat.a.w);
+    }
+    let delta = mat_is_delta(mat);
+
+    if !(*st).features_done && !delta {
+        let f = features(mat);
+        (*st).out.diffuse = f[0];
+        (*st).out.specular = f[1];
+        (*st).out.albedo = min(f[0] + f[1], vec3<f32>(1.0));
+        (*st).out.normal = select(-ns, ns, front);
+        (*st).features_done = true;
+    }
+
+    // Emission reached by the camera or by BSDF sampling, weighted against light sampling.
+    if mat.emission.w > 0.5 && front {
+        var weight = 1.0;
+        if !prev_delta {
+            let light_pdf = (1.0 - env.radiance.w) * tri.e1.w * hit.t * hit.t / dot(ng, -d);
+            weight = power_heuristic(prev_pdf, light_pdf);
+        }
+        (*st).out.radiance += throughput * mat.emission.xyz * weight;
+    }
+
+    let kind = mat_kind(mat);
+    let one_sided = (mat_flags(mat) & FLAG_TWO_SIDED) == 0u && kind != KIND_DIELECTRIC && kind != KIND_THIN_DIELECTRIC;
+    if depth + 1u >= params.max_depth || (one_sided && !front) {
+        return false;
+    }
+    let frame = basis(ns);
+    let to_local = transpose(frame);
+    let wo = to_local * -d;
+
+    // Next-event estimation: the environment with probability env_radiance.w, otherwise
+    // a point on a triangle light picked by power.
+    let env_pick = select(0.0, env.radiance.w, HAS_ENV);
+    if (params.light_count > 0u || env_pick > 0.0) && !delta {
+        var wi = vec3<f32>(0.0);
+        var light_pdf = 0.0;
+        var radiance = vec3<f32>(0.0);
+        var lp = vec3<f32>(0.0);
+        var to_env = true;
+        if rand() < env_pick {
+            let es = env_sample(vec2<f32>(rand(), rand()));
+            wi = es.d;
+            light_pdf = env_pick * es.pdf;
+            radiance = es.radiance;
+        } else {
+            let light = lights[pick_light(rand())];
+            let lt = tris[light.tri];
+            var a = rand();
+            var b = rand();
+            if a + b > 1.0 {
+                a = 1.0 - a;
+                b = 1.0 - b;
+            }
+            lp = lt.p0.xyz + a * lt.e1.xyz + b * lt.e2.xyz;
+            to_env = false;
+            let lng = normalize(cross(lt.e1.xyz, lt.e2.xyz));
+            let to_light = lp - p;
+            let dist2 = dot(to_light, to_light);
+            wi = to_light / sqrt(dist2);
+            let cos_light = dot(lng, -wi);
+            if cos_light > 0.0 {
+                light_pdf = (1.0 - env_pick) * lt.e1.w * dist2 / cos_light;
+                radiance = materials[bitcast<u32>(lt.p0.w)].emission.xyz;
+            }
+        }
+        let wi_local = to_local * wi;
+        // The shading and geometric normals must agree on the side wi leaves from.
+        if light_pdf > 0.0 && dot(ng, wi) * wi_local.z > 0.0 {
+            let f = bsdf_eval(mat, wo, wi_local);
+            if any(f > vec3<f32>(0.0)) && any(radiance > vec3<f32>(0.0)) {
+                let origin = offset_origin(p, ng, wi);
+                // Shadow rays to a triangle light end just short of it.
+                var shadow_d = wi;
+                var t_max = T_MAX;
+                if !to_env {
+                    shadow_d = normalize(lp - origin);
+                    t_max = length(lp - origin) * (1.0 - 1e-4);
+                }
+                if !occluded(origin, shadow_d, t_max) {
+                    let weight = power_heuristic(light_pdf, bsdf_pdf(mat, wo, wi_local));
+                    (*st).out.radiance += throughput * f * radiance * weight / light_pdf;
+                }
+            }
+        }
+    }
+
+    // BSDF sampling.
+    let s = bsdf_sample(mat, wo, vec2<f32>(rand(), rand()), rand());
+    if !s.valid {
+        return false;
+    }
+    let wi = frame * s.wi;
+    if dot(ng, wi) * s.wi.z <= 0.0 {
+        return false;
+    }
+    var next = throughput * s.weight;
+    let next_depth = depth + 1u;
+
+    if next_depth >= RR_DEPTH {
+        let q = min(max(next.x, max(next.y, next.z)), 0.95);
+        if rand() >= q {
+            return false;
+        }
+        next /= q;
+    }
+    if max(next.x, max(next.y, next.z)) <= 0.0 {
+        return false;
+    }
+    (*st).throughput = next;
+    (*st).prev_pdf = s.pdf;
+    (*st).prev_delta = s.delta;
+    (*st).depth = next_depth;
+    (*st).o = offset_origin(p, ng, wi);
+    (*st).d = normalize(wi);
+    return true;
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -453,12 +471,18 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     for (var k = 0u; k < ACCUM_STRIDE; k++) {
         acc[k] = accum[base + k];
     }
-    for (var s = 0u; s < params.samples_per_dispatch; s++) {
-        let sample_index = params.sample_offset + s;
-        rng_state = pcg(pixel_index ^ pcg(sample_index ^ pcg(params.seed_lo ^ pcg(params.seed_hi))));
-        let r = trace(gid.xy);
+    // Path regeneration: when a path ends, the invocation starts its next sample at once, so
+    // the SIMD lanes that run neighbouring pixels together (8 per vector on lavapipe) stay busy
+    // until all of their samples are done instead of waiting for the longest path of each sample.
+    var done = 0u;
+    var st = start_path(gid.xy, pixel_index, params.sample_offset);
+    loop {
+        if bounce(&st) {
+            continue;
+        }
         // A non-finite sample would poison the pixel: it is discarded and counted, and the
         // host reports the count.
+        let r = st.out;
         var c = r.radiance;
         if !(all(c == c) && all(abs(c) <= vec3<f32>(3.0e38))) {
             c = vec3<f32>(0.0);
@@ -470,6 +494,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         acc[9] += r.diffuse.x; acc[10] += r.diffuse.y; acc[11] += r.diffuse.z;
         acc[12] += r.specular.x; acc[13] += r.specular.y; acc[14] += r.specular.z;
         acc[15] += r.normal.x; acc[16] += r.normal.y; acc[17] += r.normal.z;
+        done += 1u;
+        if done >= params.samples_per_dispatch {
+            break;
+        }
+        st = start_path(gid.xy, pixel_index, params.sample_offset + done);
     }
     for (var k = 0u; k < ACCUM_STRIDE; k++) {
         accum[base + k] = acc[k];

@@ -1,6 +1,6 @@
 use std::collections::HashMap;
 use std::sync::Mutex;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use bytemuck::{Pod, Zeroable};
 use hush_dataset::Image;
@@ -17,6 +17,9 @@ pub const KERNEL_SOURCE: &str = concat!(include_str!("bsdf.wgsl"), include_str!(
 const ACCUM_STRIDE: usize = 19;
 /// Paths per dispatch to aim for: about a second of work on lavapipe, so progress is smooth.
 const PATHS_PER_DISPATCH: u64 = 1 << 20;
+/// Paths per dispatch under a time limit: a pass is the unit a limit can stop at, so it is
+/// smaller, about a second of work on lavapipe or less.
+const PATHS_PER_TIMED_DISPATCH: u64 = 1 << 17;
 /// Samples one invocation takes per dispatch, at most. On lavapipe, invocations that looped
 /// over 255 or more samples in one dispatch lost part of their work (images came out 16 %
 /// and more too dark, worse in later rows) while 128 were exact; the Mitsuba comparisons
@@ -48,7 +51,12 @@ pub struct RenderOutput {
     /// World-space shading normal at the first hit, averaged and renormalized; 0 where every
     /// sample escaped.
     pub normal: Image,
+    /// Samples per pixel actually rendered: `settings.spp`, or fewer when a time limit ended
+    /// the render first.
     pub spp: u32,
+    /// Dispatches (passes) it took; each pass adds the same number of samples per pixel to
+    /// every pixel, except a last one cut short by `settings.spp`.
+    pub passes: u32,
     /// Non-finite path samples the kernel discarded (0 in a correct render).
     pub discarded_samples: u64,
     /// Wall-clock seconds spent tracing (upload and read-back included; compiling the kernel
@@ -148,6 +156,22 @@ impl<'a> Renderer<'a> {
         &self,
         scene: &Scene,
         settings: &RenderSettings,
+        progress: &mut dyn FnMut(u32, u32),
+    ) -> Result<RenderOutput, TraceError> {
+        self.render_within(scene, settings, None, progress)
+    }
+
+    /// Renders pass after pass until `time_limit` is spent or `settings.spp` (then a cap) is
+    /// reached, whichever comes first; [`RenderOutput::spp`] says how many samples per pixel
+    /// that was. A pass starts only while the time spent tracing is below the limit, so the
+    /// render takes at least one pass and overshoots the limit by at most one pass; the passes
+    /// hold fewer paths than without a limit (about 2^17), and the image equals `render`'s at the
+    /// spp reached up to floating-point rounding.
+    pub fn render_within(
+        &self,
+        scene: &Scene,
+        settings: &RenderSettings,
+        time_limit: Option<Duration>,
         progress: &mut dyn FnMut(u32, u32),
     ) -> Result<RenderOutput, TraceError> {
         let mut start = Instant::now();
@@ -265,9 +289,10 @@ impl<'a> Renderer<'a> {
             light_count: flat.lights.len() as u32,
             pad: [0; 3],
         };
-        let per_dispatch = (PATHS_PER_DISPATCH / pixels).clamp(1, MAX_SAMPLES_PER_DISPATCH) as u32;
-        let mut done = 0u32;
-        while done < settings.spp {
+        let paths_per_dispatch = if time_limit.is_some() { PATHS_PER_TIMED_DISPATCH } else { PATHS_PER_DISPATCH };
+        let per_dispatch = (paths_per_dispatch / pixels).clamp(1, MAX_SAMPLES_PER_DISPATCH) as u32;
+        let (mut done, mut passes) = (0u32, 0u32);
+        while done < settings.spp && (passes == 0 || time_limit.is_none_or(|limit| start.elapsed() < limit)) {
             let n = per_dispatch.min(settings.spp - done);
             params.sample_offset = done;
             params.samples_per_dispatch = n;
@@ -285,6 +310,7 @@ impl<'a> Renderer<'a> {
                 .poll(wgpu::PollType::wait_indefinitely())
                 .map_err(|e| TraceError::Gpu(format!("waiting for the render: {e}")))?;
             done += n;
+            passes += 1;
             progress(done, settings.spp);
         }
 
@@ -306,7 +332,8 @@ impl<'a> Renderer<'a> {
         drop(view);
         readback.unmap();
 
-        let mut out = unpack(&data, w as usize, h as usize, settings.spp);
+        let mut out = unpack(&data, w as usize, h as usize, done);
+        out.passes = passes;
         out.seconds = start.elapsed().as_secs_f64();
         Ok(out)
     }
@@ -345,6 +372,7 @@ fn unpack(data: &[f32], w: usize, h: usize, spp: u32) -> RenderOutput {
         specular,
         normal,
         spp,
+        passes: 0,
         discarded_samples: discarded,
         seconds: 0.0,
     }

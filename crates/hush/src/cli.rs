@@ -69,9 +69,14 @@ pub struct ViewOverrides {
 pub struct RenderArgs {
     /// Scene file (Mitsuba XML).
     pub scene: PathBuf,
-    /// Samples per pixel.
-    #[arg(long)]
-    pub spp: u32,
+    /// Samples per pixel; with --time-limit, the most to render.
+    #[arg(long, required_unless_present = "time_limit")]
+    pub spp: Option<u32>,
+    /// Render passes until this many seconds of tracing are spent (at least one pass; the
+    /// last may run past the limit), for equal-time comparisons; prints and records the spp
+    /// reached. With --spp, whichever is reached first ends the render.
+    #[arg(long, value_name = "SECONDS")]
+    pub time_limit: Option<f64>,
     /// Output EXR.
     #[arg(long)]
     pub out: PathBuf,

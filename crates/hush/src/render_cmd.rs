@@ -1,3 +1,5 @@
+use std::time::Duration;
+
 use anyhow::{Context, Result, bail};
 use glam::Vec3;
 use hush_dataset::{write_exr, write_png_preview};
@@ -52,26 +54,39 @@ pub fn open_gpu() -> Result<GpuContext> {
     Ok(gpu)
 }
 
-/// Renders with a progress bar (samples per pixel, paths per second, ETA).
+/// Renders with a progress bar: samples per pixel done, M paths/s and the time left (to the
+/// spp asked for, or to the end of `time_limit`, which then bounds the render as in
+/// [`Renderer::render_within`]).
 pub fn render_with_progress(
     renderer: &Renderer,
     scene: &Scene,
     settings: &RenderSettings,
+    time_limit: Option<Duration>,
     label: &str,
 ) -> Result<RenderOutput> {
-    let bar = ProgressBar::new(settings.spp as u64);
-    bar.set_style(
-        ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} spp {msg} eta {eta}")
-            .expect("valid template")
-            .progress_chars("=> "),
-    );
+    // With a time limit the bar measures time (in milliseconds), so its ETA is the budget left.
+    let (len, template) = match time_limit {
+        None => (settings.spp as u64, "{prefix} [{bar:30}] {pos}/{len} spp {msg} eta {eta}"),
+        Some(limit) => (limit.as_millis().max(1) as u64, "{prefix} [{bar:30}] {msg} eta {eta}"),
+    };
+    let bar = ProgressBar::new(len);
+    bar.set_style(ProgressStyle::with_template(template).expect("valid template").progress_chars("=> "));
     bar.set_prefix(label.to_string());
     let pixels = scene.film.width as f64 * scene.film.height as f64;
     let start = std::time::Instant::now();
-    let out = renderer.render(scene, settings, &mut |done, _| {
-        let rate = pixels * done as f64 / start.elapsed().as_secs_f64().max(1e-9) / 1e6;
-        bar.set_message(format!("{rate:.2} M paths/s"));
-        bar.set_position(done as u64);
+    let out = renderer.render_within(scene, settings, time_limit, &mut |done, _| {
+        let elapsed = start.elapsed();
+        let rate = pixels * done as f64 / elapsed.as_secs_f64().max(1e-9) / 1e6;
+        match time_limit {
+            None => {
+                bar.set_message(format!("{rate:.2} M paths/s"));
+                bar.set_position(done as u64);
+            }
+            Some(_) => {
+                bar.set_message(format!("{done} spp {rate:.2} M paths/s"));
+                bar.set_position((elapsed.as_millis() as u64).min(len));
+            }
+        }
     })?;
     bar.finish_and_clear();
     if out.discarded_samples > 0 {
@@ -88,14 +103,21 @@ fn mean_luminance(image: &hush_dataset::Image) -> f64 {
 }
 
 pub fn run(args: RenderArgs) -> Result<()> {
-    if args.spp == 0 {
+    if args.spp == Some(0) {
         bail!("--spp must be at least 1");
     }
+    let time_limit = match args.time_limit {
+        None => None,
+        Some(t) if t.is_finite() && t > 0.0 => Some(Duration::from_secs_f64(t)),
+        Some(t) => bail!("--time-limit must be a positive number of seconds, not {t}"),
+    };
+    // Without --spp the time limit alone ends the render.
+    let spp = args.spp.unwrap_or(u32::MAX);
     let scene = load_scene(&args.scene, &args.view)?;
     let gpu = open_gpu()?;
     let renderer = Renderer::new(&gpu)?.with_generic_kernel(args.generic);
     let cpu0 = cpu_seconds();
-    let out = render_with_progress(&renderer, &scene, &RenderSettings { spp: args.spp, seed: args.seed }, "render")?;
+    let out = render_with_progress(&renderer, &scene, &RenderSettings { spp, seed: args.seed }, time_limit, "render")?;
     let cpu = cpu_seconds() - cpu0;
     write_exr(
         &args.out,
@@ -111,12 +133,14 @@ pub fn run(args: RenderArgs) -> Result<()> {
     if let Some(png) = &args.png {
         write_png_preview(png, &out.color, 1.0)?;
     }
-    let paths = scene.film.width as f64 * scene.film.height as f64 * args.spp as f64;
+    let paths = scene.film.width as f64 * scene.film.height as f64 * out.spp as f64;
     eprintln!(
-        "{}×{} at {} spp in {:.2} s ({:.2} CPU-s): {:.3} M paths/s, {:.3} M paths per CPU-second → {}",
+        "{}×{} at {} spp ({} pass{}) in {:.2} s ({:.2} CPU-s): {:.3} M paths/s, {:.3} M paths per CPU-second → {}",
         scene.film.width,
         scene.film.height,
-        args.spp,
+        out.spp,
+        out.passes,
+        if out.passes == 1 { "" } else { "es" },
         out.seconds,
         cpu,
         paths / out.seconds / 1e6,
@@ -128,7 +152,9 @@ pub fn run(args: RenderArgs) -> Result<()> {
             "scene": args.scene,
             "width": scene.film.width,
             "height": scene.film.height,
-            "spp": args.spp,
+            "spp": out.spp,
+            "passes": out.passes,
+            "time_limit_seconds": args.time_limit,
             "max_depth": scene.max_depth,
             "paths": paths,
             "wall_seconds": out.seconds,

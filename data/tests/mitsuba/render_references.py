@@ -184,6 +184,12 @@ def footer():
     return "</scene>\n"
 
 
+def two_spheres(spp, left_bsdf, right_bsdf):
+    """The room with two spheres of radius 0.35 side by side on its floor."""
+    files = {"left.obj": sphere_obj((-0.45, -0.65, 0.0), 0.35), "right.obj": sphere_obj((0.45, -0.65, 0.0), 0.35)}
+    return files, header(spp) + room() + obj("left.obj", left_bsdf) + obj("right.obj", right_bsdf) + footer()
+
+
 # ---------------------------------------------------------------- the scenes
 
 # Each scene: (what it tests, spp, files {name: text|callable}, xml(spp) -> str).
@@ -229,7 +235,6 @@ def _(spp):
 
 @scene("roughconductor", "`roughconductor` GGX, visible normals: alpha 0.05 (eta/k given) and 0.3 (Al)", 24576)
 def _(spp):
-    files = {"left.obj": sphere_obj((-0.45, -0.65, 0.0), 0.35), "right.obj": sphere_obj((0.45, -0.65, 0.0), 0.35)}
     glossy = """    <bsdf type="roughconductor">
       <string name="distribution" value="ggx"/>
       <float name="alpha" value="0.05"/>
@@ -243,7 +248,7 @@ def _(spp):
       <float name="alpha" value="0.3"/>
     </bsdf>
 """
-    return files, header(spp) + room() + obj("left.obj", glossy) + obj("right.obj", rough) + footer()
+    return two_spheres(spp, glossy, rough)
 
 
 @scene("dielectric", "smooth `dielectric` glass sphere (IOR 1.5), caustic on the floor", 49152)
@@ -307,6 +312,24 @@ def _(spp):
     </bsdf>
 """
     return files, header(spp) + room() + obj("sphere.obj", bsdf) + footer()
+
+
+@scene("beckmann", "Beckmann microfacets: `roughconductor` (Cu, alpha 0.15) and `roughplastic` (green, alpha 0.3) spheres", 16384)
+def _(spp):
+    metal = """    <bsdf type="roughconductor">
+      <string name="distribution" value="beckmann"/>
+      <string name="material" value="Cu"/>
+      <float name="alpha" value="0.15"/>
+    </bsdf>
+"""
+    plastic = """    <bsdf type="roughplastic">
+      <string name="distribution" value="beckmann"/>
+      <float name="alpha" value="0.3"/>
+      <rgb name="diffuse_reflectance" value="0.15, 0.6, 0.2"/>
+      <float name="int_ior" value="1.49"/>
+    </bsdf>
+"""
+    return two_spheres(spp, metal, plastic)
 
 
 @scene("textured", "`bitmap` (8-bit sRGB PNG, bilinear, repeat) as diffuse reflectance on floor and back wall", 16384)

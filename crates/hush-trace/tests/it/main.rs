@@ -312,6 +312,12 @@ fn matches_mitsuba_plastic() {
     compare_with_mitsuba("plastic", 256);
 }
 
+/// Beckmann microfacets (Mitsuba's default distribution): a rough conductor and a rough plastic.
+#[test]
+fn matches_mitsuba_beckmann() {
+    compare_with_mitsuba("beckmann", 256);
+}
+
 /// An 8-bit sRGB checkerboard (bilinear, repeat) as the diffuse reflectance of the floor and
 /// the back wall: UVs of Mitsuba's `rectangle`, sRGB decoding and the bilinear lookup.
 #[test]
@@ -335,6 +341,34 @@ fn matches_mitsuba_environment_map() {
 #[test]
 fn matches_mitsuba_under_stiff_lighting() {
     compare_with_mitsuba("stiff", 512);
+}
+
+/// `render_within` stops at pass granularity, and neither check depends on the machine's speed:
+/// a limit shorter than any pass still renders exactly one pass, the same image as `render` at
+/// the spp it reached (8² pixels: 16 samples per pass with or without a limit, so the same
+/// dispatches, bit for bit); an hour's limit with an spp cap stops at the cap (40 spp is
+/// 16 + 16 + 8 in three passes).
+#[test]
+fn time_limit_renders_whole_passes_up_to_the_spp_cap() {
+    use std::time::Duration;
+    let scene = cbox(8);
+    let renderer = Renderer::new(gpu()).unwrap();
+    let tiny = renderer
+        .render_within(&scene, &RenderSettings { spp: 1000, seed: 5 }, Some(Duration::from_nanos(1)), &mut |_, _| {})
+        .unwrap();
+    assert_eq!(tiny.passes, 1);
+    assert!((1..1000).contains(&tiny.spp), "{} spp", tiny.spp);
+    let same = renderer.render(&scene, &RenderSettings { spp: tiny.spp, seed: 5 }, &mut |_, _| {}).unwrap();
+    assert_eq!((same.spp, same.passes), (tiny.spp, 1));
+    assert_eq!(tiny.color.data, same.color.data);
+    let mut reported = Vec::new();
+    let capped = renderer
+        .render_within(&scene, &RenderSettings { spp: 40, seed: 5 }, Some(Duration::from_secs(3600)), &mut |d, _| {
+            reported.push(d)
+        })
+        .unwrap();
+    assert_eq!((capped.spp, capped.passes), (40, 3));
+    assert_eq!(reported, [16, 32, 40]);
 }
 
 /// The kernel specialized to a scene (what it lacks compiled out) traces the same paths as the
