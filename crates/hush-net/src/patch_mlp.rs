@@ -165,16 +165,15 @@ impl Grid {
         Grid { rows, cols, height, width, top, left }
     }
 
-    /// For every patch (row-major) and every pixel of it (row-major): the pixel's index in the padded
-    /// image, `y × width + x`.
-    fn indices(&self, patch: usize, stride: usize) -> Vec<u32> {
-        let mut ids = Vec::with_capacity(self.rows * self.cols * patch * patch);
-        for py in 0..self.rows {
-            for px in 0..self.cols {
-                for dy in 0..patch {
-                    let row = (py * stride + dy) * self.width + px * stride;
-                    ids.extend((0..patch).map(|dx| (row + dx) as u32));
-                }
+    /// For the patches `range` (row-major over the grid) and every pixel of each (row-major): the pixel's
+    /// index in the padded image, `y × width + x`.
+    fn indices(&self, patch: usize, stride: usize, range: std::ops::Range<usize>) -> Vec<u32> {
+        let mut ids = Vec::with_capacity(range.len() * patch * patch);
+        for k in range {
+            let (py, px) = (k / self.cols, k % self.cols);
+            for dy in 0..patch {
+                let row = (py * stride + dy) * self.width + px * stride;
+                ids.extend((0..patch).map(|dx| (row + dx) as u32));
             }
         }
         ids
@@ -264,7 +263,8 @@ impl PatchMlp {
     }
 
     /// [`Module::forward`] with the patches run through the MLP `chunk` at a time per image, which bounds the
-    /// memory of large images (the gathered rows and the hidden activations) without changing the result.
+    /// memory of large images (patch indices, gathered rows, hidden activations and window weights live one
+    /// chunk at a time) without changing the result.
     fn forward_chunked(&self, x: &Tensor, chunk: usize) -> Result<Tensor> {
         let (n, c, h, w) = match x.dims4() {
             Ok(d) => d,
@@ -284,15 +284,33 @@ impl PatchMlp {
         // Pixels as rows of channels, so that a patch is `patch²` gathered rows: `N × (H · W) × C`.
         let pixels = x.permute((0, 2, 3, 1))?.contiguous()?.reshape((n, grid.height * grid.width, c))?;
         let patches = grid.rows * grid.cols;
-        let ids = Tensor::from_vec(grid.indices(p, s), patches * p2, x.device())?;
         let mut sum = Tensor::zeros((n, grid.height * grid.width, self.cfg.out_channels), x.dtype(), x.device())?;
+        // The summed weights do not depend on the data: no gradient flows through them. Every padded pixel lies
+        // in at least one patch (stride ≤ patch) and the window is positive, so none is 0.
+        let mut norm = Tensor::zeros((1, grid.height * grid.width, 1), x.dtype(), x.device())?;
         for start in (0..patches).step_by(chunk.max(1)) {
             let m = chunk.max(1).min(patches - start);
-            let ids = ids.narrow(0, start * p2, m * p2)?;
+            let ids = Tensor::from_vec(grid.indices(p, s, start..start + m), m * p2, x.device())?;
             let rows = pixels.index_select(&ids, 1)?.reshape((n * m, p2 * c))?;
             sum = self.accumulate(&sum, &self.mlp(&rows)?, &ids)?;
+            norm = norm.index_add(&ids, &self.window_rows(m)?, 1)?;
         }
-        self.normalize(&sum, grid, &ids, h, w)
+        self.normalize(&sum, &norm, grid, h, w)
+    }
+
+    /// The window's weights for `m` patches, as the rows `index_add` spreads over their pixels:
+    /// `1 × (m · patch²) × 1`, detached (no gradient flows through the normalization).
+    fn window_rows(&self, m: usize) -> Result<Tensor> {
+        let p2 = self.cfg.patch * self.cfg.patch;
+        Ok(self.window.reshape((1, p2, 1))?.repeat((1, m, 1))?.detach())
+    }
+
+    /// The weighted sums `sum` (`N × pixels × C`) divided by the summed weights `norm` (`1 × pixels × 1`),
+    /// cropped back to `h × w`: `N × C × h × w`.
+    fn normalize(&self, sum: &Tensor, norm: &Tensor, grid: Grid, h: usize, w: usize) -> Result<Tensor> {
+        let (n, _, c) = sum.dims3()?;
+        let image = sum.broadcast_div(norm)?.reshape((n, grid.height, grid.width, c))?.permute((0, 3, 1, 2))?;
+        image.narrow(2, grid.top, h)?.narrow(3, grid.left, w)?.contiguous()
     }
 
     /// Adds output rows `(N · m) × (patch² · C)` of `m` patches, each weighted by the Gaussian window, at their
@@ -303,21 +321,6 @@ impl PatchMlp {
         let m = ids.dims1()? / p2;
         let weighted = rows.reshape((n, m, p2, c))?.broadcast_mul(&self.window)?.reshape((n, m * p2, c))?;
         sum.index_add(ids, &weighted, 1)
-    }
-
-    /// The weighted sums divided by the summed weights of every patch (`ids` of all of them), cropped back to
-    /// `h × w`: `N × C × h × w`.
-    fn normalize(&self, sum: &Tensor, grid: Grid, ids: &Tensor, h: usize, w: usize) -> Result<Tensor> {
-        let (n, pixels, c) = sum.dims3()?;
-        let p2 = self.cfg.patch * self.cfg.patch;
-        let patches = ids.dims1()? / p2;
-        // The summed weights do not depend on the data: no gradient flows through them. Every padded pixel lies
-        // in at least one patch (stride ≤ patch) and the window is positive, so none is 0.
-        let ones = self.window.reshape((1, p2, 1))?.repeat((1, patches, 1))?;
-        let norm = Tensor::zeros((1, pixels, 1), sum.dtype(), sum.device())?.index_add(ids, &ones, 1)?;
-        let image = sum.broadcast_div(&norm.detach())?;
-        let image = image.reshape((n, grid.height, grid.width, c))?.permute((0, 3, 1, 2))?;
-        image.narrow(2, grid.top, h)?.narrow(3, grid.left, w)?.contiguous()
     }
 }
 
@@ -392,7 +395,7 @@ mod tests {
         let (h, w) = (17, 20);
         let grid = Grid::new(h, w, 17, 3);
         assert_eq!((grid.rows, grid.cols, grid.top, grid.left), (1, 2, 0, 0));
-        let ids = Tensor::from_vec(grid.indices(17, 3), 2 * 17 * 17, &Device::Cpu)?;
+        let ids = Tensor::from_vec(grid.indices(17, 3, 0..2), 2 * 17 * 17, &Device::Cpu)?;
         let rows = Tensor::cat(
             &[
                 Tensor::ones((1, 17 * 17 * 3), DType::F32, &Device::Cpu)?,
@@ -401,7 +404,8 @@ mod tests {
             0,
         )?;
         let sum = Tensor::zeros((1, h * w, 3), DType::F32, &Device::Cpu)?;
-        let merged = net.normalize(&net.accumulate(&sum, &rows, &ids)?, grid, &ids, h, w)?;
+        let norm = Tensor::zeros((1, h * w, 1), DType::F32, &Device::Cpu)?.index_add(&ids, &net.window_rows(2)?, 1)?;
+        let merged = net.normalize(&net.accumulate(&sum, &rows, &ids)?, &norm, grid, h, w)?;
         let merged = merged.i((0, 1, 5))?.to_vec1::<f32>()?;
         let s2 = 2.0 * cfg.sigma * cfg.sigma;
         for (x, &got) in merged.iter().enumerate() {
