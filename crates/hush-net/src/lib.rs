@@ -61,7 +61,7 @@ pub use net::{DenoiseNet, Net, NetConfig, PATCH_MLP_KIND};
 pub use patch_mlp::{Activation, BURGER_HIDDEN, BURGER_PATCH, BURGER_STRIDE, PatchMlp, PatchMlpConfig};
 pub use tza::{TzaTensor, export_tza, infer_config, load_tza, oidn_features, parse_tza, write_tza};
 pub use unet::{
-    ALIGNMENT, ConvShape, THESIS_M1_WIDTH, THESIS_M2_WIDTH, UNet, UNetConfig, UNetKind, crop, hwc_to_nchw,
+    ALIGNMENT, ConvShape, THESIS_M1_WIDTH, THESIS_M2_WIDTH, UNet, UNetConfig, UNetKind, crop, fnv1a, hwc_to_nchw,
     init_weights, nchw_to_hwc, pad_to_multiple,
 };
 pub use weights::{F32View, METADATA_KEY, ModelInfo, load_model, load_weights, read_metadata, save_weights};

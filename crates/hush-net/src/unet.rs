@@ -444,7 +444,8 @@ pub fn init_weights(varmap: &VarMap, seed: u64) -> Result<()> {
     Ok(())
 }
 
-fn fnv1a(bytes: &[u8]) -> u64 {
+/// The 64-bit FNV-1a hash of `bytes`: a stable, dependency-free fingerprint (of weight names, cache keys).
+pub fn fnv1a(bytes: &[u8]) -> u64 {
     bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| (h ^ b as u64).wrapping_mul(0x0100_0000_01b3))
 }
 

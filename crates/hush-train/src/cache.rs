@@ -13,6 +13,7 @@
 
 use half::f16;
 use hush_dataset::Image;
+use hush_net::fnv1a;
 
 use crate::{Result, TrainError, TrainSample};
 
@@ -133,9 +134,4 @@ fn put_u32(out: &mut Vec<u8>, v: u32) {
 
 fn len_u32(n: usize) -> Result<u32> {
     u32::try_from(n).map_err(|_| TrainError::Data(format!("{n} is too large for the sample cache")))
-}
-
-/// FNV-1a, 64 bits.
-pub fn fnv1a(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| (h ^ b as u64).wrapping_mul(0x0100_0000_01b3))
 }

@@ -49,12 +49,12 @@ mod sample;
 mod schedule;
 mod train;
 
-pub use cache::{decode_samples, encode_samples, fnv1a, round_trip};
+pub use cache::{decode_samples, encode_samples, round_trip};
 pub use checkpoint::{STATE_KEY, TrainState, read_train_state};
 pub use config::TrainConfig;
 pub use error::{Result, TrainError};
 pub use optim::{Optimizer, OptimizerConfig};
 pub use plot::plot_losses;
-pub use sample::{Augment, Crop, TrainSample};
+pub use sample::{Augment, Crop, PREPARATION_VERSION, TrainSample};
 pub use schedule::Schedule;
 pub use train::{EpochRow, LossRow, StepReport, Trained, train};

@@ -7,6 +7,11 @@ use serde::{Deserialize, Serialize};
 
 use crate::{Result, TrainError};
 
+/// The version of what [`TrainSample::from_linear`] makes of a dataset's images (exposure, transfer
+/// function, the features' preparation): part of every sample cache's key, so a change here must bump it
+/// and caches prepared the old way are rebuilt rather than trusted.
+pub const PREPARATION_VERSION: u32 = 1;
+
 /// One training pair, already in the network's space: `input` has the network's input channels
 /// (color, then the auxiliary features) and `target` 3 channels, both interleaved (HWC) and the same size.
 #[derive(Clone, Debug, PartialEq)]

@@ -8,10 +8,10 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use hush_dataset::{Image, Manifest, Split, load_view, write_atomic};
 use hush_net::transfer::Transfer;
-use hush_net::{Activation, Features, Loss, NetConfig, PatchMlpConfig, UNetConfig, UNetKind};
+use hush_net::{Activation, Features, Loss, NetConfig, PatchMlpConfig, UNetConfig, UNetKind, fnv1a};
 use hush_train::{
-    Augment, EpochRow, LossRow, OptimizerConfig, Schedule, TrainConfig, TrainError, TrainSample, decode_samples, fnv1a,
-    plot_losses, read_train_state, round_trip, train,
+    Augment, EpochRow, LossRow, OptimizerConfig, PREPARATION_VERSION, Schedule, TrainConfig, TrainError, TrainSample,
+    decode_samples, plot_losses, read_train_state, round_trip, train,
 };
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
@@ -204,18 +204,19 @@ fn resolve(args: &TrainArgs, base: Option<&RunConfig>, train_images: usize) -> R
         Some(f) => parse_features(f)?,
         None => b.map_or_else(|| parse_features("color,albedo,normal"), |b| Ok(b.features.clone()))?,
     };
-    let net = match (&args.arch, args.width, b) {
-        // Resuming without new network options: the run's own network, whatever its kind.
-        (None, None, Some(b)) => b.net.with_in_channels(features.in_channels()),
-        (arch, width, _) => {
-            let arch = match arch {
-                Some(a) => parse_arch(a)?,
-                None => match b.map(|b| &b.net) {
-                    Some(NetConfig::PatchMlp(c)) => Arch::PatchMlp(c.activation),
-                    Some(NetConfig::UNet(c)) => Arch::UNet(c.kind),
-                    None => Arch::UNet(UNetKind::Unet),
-                },
-            };
+    let base_arch = b.map(|b| match &b.net {
+        NetConfig::PatchMlp(c) => Arch::PatchMlp(c.activation),
+        NetConfig::UNet(c) => Arch::UNet(c.kind),
+    });
+    let arch = match &args.arch {
+        Some(a) => parse_arch(a)?,
+        None => base_arch.unwrap_or(Arch::UNet(UNetKind::Unet)),
+    };
+    let net = match (b, args.width) {
+        // Resuming with the run's own kind of network and no new width: the run's network as it was (an
+        // MLP's hidden sizes, σ and patch included), whatever repeats its `--arch`.
+        (Some(b), None) if base_arch == Some(arch) => b.net.with_in_channels(features.in_channels()),
+        (b, width) => {
             let base_width = b.and_then(|b| b.net.as_unet()).map(|c| c.width);
             arch.config(features.in_channels(), width.or(base_width).unwrap_or(0.25))
         }
@@ -306,13 +307,14 @@ fn load_split(cfg: &RunConfig, manifest: &Manifest, split: Split) -> Result<(Vec
         .collect();
     let names: Vec<String> =
         records.iter().map(|(view, spp)| format!("{}_{}@{spp}spp", view.scene, view.view)).collect();
-    let manifest_hash = fnv1a(&serde_json::to_vec(manifest)?);
-    let key = format!(
-        "manifest {manifest_hash:016x}, features {features}, transfer {:?}, {split:?} split, samples {}",
-        Transfer::Pu,
-        names.join(" ")
-    );
-    let path = cfg.dataset.join("cache").join(format!("{split:?}-{:016x}.f16", fnv1a(key.as_bytes())).to_lowercase());
+    // The file is named by what the samples are (features, transfer, split, views and spp), so a changed
+    // dataset replaces its cache rather than adding one; the key inside also covers the records of this
+    // split's views (files, seeds, sizes) and how samples are prepared, and a mismatch rebuilds the file.
+    let what =
+        format!("features {features}, transfer {:?}, {split:?} split, samples {}", Transfer::Pu, names.join(" "));
+    let views: Vec<_> = manifest.split(split).collect();
+    let key = format!("views {:016x}, preparation {PREPARATION_VERSION}, {what}", fnv1a(&serde_json::to_vec(&views)?));
+    let path = cfg.dataset.join("cache").join(format!("{split:?}-{:016x}.f16", fnv1a(what.as_bytes())).to_lowercase());
     let samples = cached_samples(&path, &key, || {
         let mut samples = Vec::new();
         for &(view, spp) in &records {
@@ -665,12 +667,32 @@ mod tests {
     use hush_dataset::Image;
     use hush_train::TrainSample;
 
-    use super::cached_samples;
+    use super::{TrainArgs, cached_samples, resolve};
 
     fn samples(value: f32) -> Vec<TrainSample> {
         let input = Image::from_fn(4, 4, 9, |x, y, c| value + 0.01 * (x + 2 * y + c) as f32);
         let target = Image::from_fn(4, 4, 3, |x, _, _| value + 0.1 * x as f32);
         vec![TrainSample { input, target }]
+    }
+
+    /// Resuming keeps the run's network when the options repeat its kind without a width: a patch MLP
+    /// trained at width 0.0625 stays at 0.0625 (it used to fall back to the default 0.25 and be refused as a
+    /// changed network); a new width or kind is a new network.
+    #[test]
+    fn resuming_with_the_same_arch_keeps_the_network() {
+        let args = |arch: &str, width: Option<f64>| TrainArgs {
+            arch: Some(arch.into()),
+            width,
+            dataset: Some("ds".into()),
+            ..Default::default()
+        };
+        let base = resolve(&args("patch_mlp", Some(0.0625)), None, 8).unwrap();
+        let resumed = resolve(&args("patch_mlp", None), Some(&base), 8).unwrap();
+        assert_eq!(resumed.train.net, base.train.net);
+        let wider = resolve(&args("patch_mlp", Some(0.125)), Some(&base), 8).unwrap();
+        assert_ne!(wider.train.net, base.train.net);
+        let unet = resolve(&args("unet", None), Some(&base), 8).unwrap();
+        assert!(unet.train.net.as_unet().is_some());
     }
 
     /// A missing, stale or damaged cache is rebuilt and rewritten; an intact one is read without preparing
