@@ -5,8 +5,15 @@ use std::time::Instant;
 pub type Result<T> = std::result::Result<T, String>;
 
 /// The repository root (this crate lives in `<root>/xtask`).
+///
+/// `cargo run` (what `cargo xtask` is) sets `CARGO_MANIFEST_DIR` for the process it starts: that one is the
+/// checkout being worked in. The value compiled in is only the fallback, because cargo does not rebuild
+/// xtask for another checkout sharing the same target directory (its fingerprint ignores the path), and a
+/// binary built in one clone would otherwise render, build and write into that clone.
 pub fn project_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("xtask sits in the repository root").to_path_buf()
+    let manifest_dir = std::env::var_os("CARGO_MANIFEST_DIR").map(PathBuf::from);
+    let manifest_dir = manifest_dir.unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")));
+    manifest_dir.parent().expect("xtask sits in the repository root").to_path_buf()
 }
 
 /// The cargo that runs us.
