@@ -498,10 +498,6 @@ pub fn run(args: TrainArgs) -> Result<()> {
         bail!("{} has no training images at spp {spp:?}", dataset.display());
     }
     let cfg = resolve(&args, base, train_images)?;
-    let loading = std::time::Instant::now();
-    let (samples, names) = load_split(&cfg, &manifest, Split::Train)?;
-    let (test, _) = load_split(&cfg, &manifest, Split::Test)?;
-    let load_seconds = loading.elapsed().as_secs_f64();
 
     let checkpoints = out.join("checkpoints");
     let last = checkpoints.join("last.safetensors");
@@ -522,6 +518,11 @@ pub fn run(args: TrainArgs) -> Result<()> {
         _ if args.resume.is_some() => bail!("--resume {}: it has no checkpoints/last.safetensors yet", out.display()),
         _ => None,
     };
+    // The samples after the cheap checks above, before anything is written.
+    let loading = std::time::Instant::now();
+    let (samples, names) = load_split(&cfg, &manifest, Split::Train)?;
+    let (test, _) = load_split(&cfg, &manifest, Split::Test)?;
+    let load_seconds = loading.elapsed().as_secs_f64();
     std::fs::create_dir_all(&checkpoints).with_context(|| format!("creating {}", checkpoints.display()))?;
     write_file(&config_path, serde_json::to_string_pretty(&cfg)?.as_bytes())?;
 
