@@ -14,6 +14,7 @@ mod train_cmd;
 use clap::Parser;
 
 fn main() {
+    cpu::keep_freed_memory();
     let cli = cli::Cli::parse();
     let result = match cli.command {
         cli::Command::Render(args) => render_cmd::run(args),
