@@ -64,10 +64,42 @@ pub fn eval_command(hush: &Path, dataset: &Path, model: &Path, out: &Path) -> Co
 }
 
 /// The result rows of the `summary.json` that `hush eval` wrote into `dir`.
-pub fn eval_rows(dir: &Path) -> Result<Vec<serde_json::Value>> {
+fn eval_rows(dir: &Path) -> Result<Vec<serde_json::Value>> {
     let path = dir.join("summary.json");
     let summary = read_json(&path)?;
     summary["rows"].as_array().cloned().ok_or_else(|| format!("{} has no rows", path.display()))
+}
+
+/// A noisy input's PSNR and the model's on the same view and spp, from `hush eval`'s rows.
+pub struct NoisyAndModel {
+    pub view: String,
+    pub spp: u64,
+    pub noisy: f64,
+    /// `None` when the summary has no row of the model for this view and spp.
+    pub model: Option<f64>,
+}
+
+/// Per noisy row of the `summary.json` that `hush eval --model model` wrote into `dir`: its PSNR and the
+/// model's on the same view and spp. Only the model's own rows count (`hush eval` names them
+/// `<run folder>/<file stem>`), not the reference's or a baseline's.
+pub fn noisy_and_model_psnr(dir: &Path, model: &Path) -> Result<Vec<NoisyAndModel>> {
+    let rows = eval_rows(dir)?;
+    let name = |p: Option<&std::ffi::OsStr>| p.map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    let method = format!("{}/{}", name(model.parent().and_then(Path::file_name)), name(model.file_stem()));
+    let psnr = |view: &str, spp: u64, method: &str| {
+        rows.iter()
+            .find(|r| r["view"] == view && r["spp"].as_u64() == Some(spp) && r["method"] == method)
+            .and_then(|r| r["psnr"].as_f64())
+    };
+    Ok(rows
+        .iter()
+        .filter(|r| r["method"] == "noisy")
+        .filter_map(|r| {
+            let (view, spp) = (r["view"].as_str()?, r["spp"].as_u64()?);
+            let noisy = r["psnr"].as_f64()?;
+            Some(NoisyAndModel { view: view.into(), spp, noisy, model: psnr(view, spp, &method) })
+        })
+        .collect())
 }
 
 pub fn run(args: &[String]) -> Result<()> {
@@ -84,17 +116,10 @@ pub fn run(args: &[String]) -> Result<()> {
     train(&hush, &paths)?;
     spawn(&mut eval_command(&hush, &paths.dataset, &paths.model(), dir))?;
 
-    let rows = eval_rows(dir)?;
-    let psnr = |view: &str, spp: u64, noisy: bool| {
-        rows.iter()
-            .find(|r| r["view"] == view && r["spp"].as_u64() == Some(spp) && (r["method"] == "noisy") == noisy)
-            .and_then(|r| r["psnr"].as_f64())
-    };
     let mut failures = Vec::new();
     let mut checked = 0;
-    for row in rows.iter().filter(|r| r["method"] == "noisy") {
-        let (view, spp) = (row["view"].as_str().unwrap_or_default(), row["spp"].as_u64().unwrap_or_default());
-        let (Some(n), Some(d)) = (psnr(view, spp, true), psnr(view, spp, false)) else {
+    for NoisyAndModel { view, spp, noisy: n, model } in noisy_and_model_psnr(dir, &paths.model())? {
+        let Some(d) = model else {
             failures.push(format!("{view} at {spp} spp: no denoised result"));
             continue;
         };

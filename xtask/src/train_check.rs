@@ -9,7 +9,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Command;
 
-use crate::demo::{eval_command, eval_rows, train_command};
+use crate::demo::{eval_command, noisy_and_model_psnr, train_command};
 use crate::util::{
     Result, build_hush, ensure_vulkan, load_average, project_root, read_json, release, spawn, target_dir, write_json,
 };
@@ -54,7 +54,7 @@ pub fn run(args: &[String]) -> Result<()> {
     let train_seconds = start.elapsed().as_secs_f64();
     let model = run_dir.join("model.safetensors");
     spawn(eval_command(&hush, &dataset, &model, &eval_dir).args(["--spp", &SPP.to_string(), "--timing-runs", "1"]))?;
-    let (scenes, failures) = per_scene_gains(&eval_dir)?;
+    let (scenes, failures) = per_scene_gains(&eval_dir, &model)?;
     let summary = serde_json::json!({
         "check": format!("per scene, mean PSNR of the model on held-out views at {SPP} spp ≥ noisy + {MIN_GAIN_DB} dB"),
         "steps": steps,
@@ -75,19 +75,15 @@ pub fn run(args: &[String]) -> Result<()> {
 }
 
 /// A view's PSNR of the noisy input and of the model.
-type NoisyAndModel = (Option<f64>, Option<f64>);
+type PsnrPair = (Option<f64>, Option<f64>);
 
 /// Per scene (the view names' part before `_v`): the held-out views' PSNR of the noisy input and the model
 /// at [`SPP`], their means and the gain; and a failure line per scene below [`MIN_GAIN_DB`].
-fn per_scene_gains(eval_dir: &Path) -> Result<(serde_json::Value, Vec<String>)> {
-    let rows = eval_rows(eval_dir)?;
-    let mut by_scene: BTreeMap<String, BTreeMap<String, NoisyAndModel>> = BTreeMap::new();
-    for r in rows.iter().filter(|r| r["spp"].as_u64() == Some(SPP)) {
-        let view = r["view"].as_str().unwrap_or_default().to_string();
-        let scene = view.rsplit_once("_v").map_or(view.as_str(), |(s, _)| s).to_string();
-        let entry = by_scene.entry(scene).or_default().entry(view).or_default();
-        let psnr = r["psnr"].as_f64();
-        if r["method"] == "noisy" { entry.0 = psnr } else { entry.1 = psnr }
+fn per_scene_gains(eval_dir: &Path, model: &Path) -> Result<(serde_json::Value, Vec<String>)> {
+    let mut by_scene: BTreeMap<String, BTreeMap<String, PsnrPair>> = BTreeMap::new();
+    for r in noisy_and_model_psnr(eval_dir, model)?.into_iter().filter(|r| r.spp == SPP) {
+        let scene = r.view.rsplit_once("_v").map_or(r.view.as_str(), |(s, _)| s).to_string();
+        by_scene.entry(scene).or_default().insert(r.view, (Some(r.noisy), r.model));
     }
     let mut failures = Vec::new();
     let mut out = serde_json::Map::new();
