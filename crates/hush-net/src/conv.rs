@@ -178,17 +178,15 @@ struct Geometry {
 
 impl Geometry {
     /// Output rows per band: enough columns for an efficient GEMM, an im2col block of about 1 MiB
-    /// (`9·C` rows of f32) so that it stays in cache, and at least 4 bands per image where possible so
-    /// that two or more threads share small images.
+    /// (`9·C` rows of f32) so that it stays in cache ([`rows_per_band`]).
     fn band_rows(&self) -> usize {
         let target_cols = ((1usize << 20) / (36 * self.c)).max(256);
-        (target_cols / self.w).clamp(1, self.h.div_ceil(4).max(1))
+        rows_per_band(target_cols, self.w, self.h)
     }
 
     /// The bands `(image, first row, rows)` of a batch of `n` images.
     fn bands(&self, n: usize) -> Vec<(usize, usize, usize)> {
-        let rows = self.band_rows();
-        (0..n).flat_map(|i| (0..self.h).step_by(rows).map(move |y0| (i, y0, rows.min(self.h - y0)))).collect()
+        bands(n, self.h, self.band_rows())
     }
 
     /// The im2col block of the output rows `y0..y0+rows` of one image (`C × H × W`): `9·C` rows of
@@ -212,6 +210,17 @@ impl Geometry {
             }
         }
     }
+}
+
+/// Rows (of pixels, or of Winograd tiles) per band: about `target` units of `row_len` each, and at least 4
+/// bands per image where possible, so that two or more threads share small images.
+fn rows_per_band(target: usize, row_len: usize, rows: usize) -> usize {
+    (target / row_len).clamp(1, rows.div_ceil(4).max(1))
+}
+
+/// The bands `(image, first row, rows)` of `n` images of `rows` rows, `per_band` rows each (the last fewer).
+fn bands(n: usize, rows: usize, per_band: usize) -> Vec<(usize, usize, usize)> {
+    (0..n).flat_map(|i| (0..rows).step_by(per_band).map(move |r0| (i, r0, per_band.min(rows - r0)))).collect()
 }
 
 /// A raw pointer that bands may share because each writes disjoint elements.
@@ -319,7 +328,7 @@ const WINOGRAD_MIN_CHANNELS: usize = 16;
 /// `U[ξ] (Co × C) · V[ξ] (C × tiles)`. Bands of tile rows run in parallel as in the im2col path; every
 /// output element still comes from one band, so the result does not depend on the thread count.
 mod winograd {
-    use super::{Geometry, SharedMut, sgemm};
+    use super::{Geometry, SharedMut, bands, rows_per_band, sgemm};
     use rayon::prelude::*;
 
     /// The transforms of one F(M×M, 3×3), `A = M + 2`.
@@ -513,10 +522,7 @@ mod winograd {
             // Tile rows per band: a transformed-input block of about 2 MiB, at least 4 bands per image
             // where possible.
             let target_tiles = ((2usize << 20) / (4 * A * A * c)).max(64);
-            let band = (target_tiles / tiles_x).clamp(1, tiles_y.div_ceil(4).max(1));
-            let bands: Vec<(usize, usize, usize)> = (0..n)
-                .flat_map(|i| (0..tiles_y).step_by(band).map(move |ty0| (i, ty0, band.min(tiles_y - ty0))))
-                .collect();
+            let bands = bands(n, tiles_y, rows_per_band(target_tiles, tiles_x, tiles_y));
             let mut y = vec![0f32; n * co * h * w];
             let out = SharedMut(y.as_mut_ptr());
             bands.into_par_iter().for_each_init(
