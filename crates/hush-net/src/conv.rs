@@ -398,8 +398,12 @@ mod winograd {
 
         /// `Bᵀ d B` of the input tiles of tile rows `ty0..ty0+rows` of one image (`C × H × W`):
         /// `A² × C × tiles`, ξ-major, tile `t = (ty − ty0)·tiles_x + tx` covering input rows
-        /// `M·ty − 1 .. M·ty − 1 + A` and the same columns, zero outside the image. The row transform
-        /// runs on whole image rows, the column transform along a tile row, so both loops vectorize.
+        /// `M·ty − 1 .. M·ty − 1 + A` and the same columns, zero outside the image.
+        ///
+        /// Each input row is first split by phase: padded column `p = x + 1` goes to phase `p mod M`, index
+        /// `p div M`, so that column `M·tx + j` of tile `tx` is element `tx + j div M` of phase `j mod M`. Both
+        /// transforms are then sums of whole contiguous runs (over columns for `Bᵀ d`, over tiles for
+        /// `(Bᵀ d) B`) that the compiler vectorizes; a per-tile loop over strided columns does not.
         fn transform_input(
             &self,
             geom: &Geometry,
@@ -410,10 +414,12 @@ mod winograd {
         ) {
             let (c, h, w) = (geom.c, geom.h, geom.w);
             let tiles = rows * tiles_x;
-            // A row at padded column p = x + 1, long enough for the last tile's A columns.
-            let len = M * tiles_x + 2;
+            // One phase holds tiles_x + 1 columns (a tile reaches A ≤ 2M columns); a split row M phases.
+            let phase = tiles_x + 1;
+            let len = M * phase;
             // Every element is written below: resizing a reused buffer needs no clearing.
             v.resize(A * A * c * tiles, 0.0);
+            // Padding columns are never written, so they stay zero.
             let mut d = vec![0f32; A * len];
             let mut m = vec![0f32; A * len];
             for ci in 0..c {
@@ -421,11 +427,16 @@ mod winograd {
                 for ty in ty0..ty0 + rows {
                     for (r, row) in d.chunks_mut(len).enumerate() {
                         match (M * ty + r).checked_sub(1).filter(|&y| y < h) {
-                            Some(y) => row[1..=w].copy_from_slice(&channel[y * w..(y + 1) * w]),
-                            None => row[1..=w].fill(0.0),
+                            Some(y) => {
+                                for (x, &e) in channel[y * w..(y + 1) * w].iter().enumerate() {
+                                    let p = x + 1;
+                                    row[(p % M) * phase + p / M] = e;
+                                }
+                            }
+                            None => row.fill(0.0),
                         }
                     }
-                    // Bᵀ d on whole rows.
+                    // Bᵀ d on whole (split) rows.
                     for (mr, btr) in m.chunks_mut(len).zip(&self.bt) {
                         mr.fill(0.0);
                         for (dr, &b) in d.chunks(len).zip(btr) {
@@ -436,14 +447,19 @@ mod winograd {
                             }
                         }
                     }
-                    // (Bᵀ d) B along the tile row: tile tx reads padded columns M·tx .. M·tx + A.
+                    // (Bᵀ d) B along the tile row, all tiles at once.
                     let t0 = (ty - ty0) * tiles_x;
                     for (r, mr) in m.chunks(len).enumerate() {
                         for (k, btk) in self.bt.iter().enumerate() {
                             let out = &mut v[((r * A + k) * c + ci) * tiles + t0..][..tiles_x];
-                            for (tx, o) in out.iter_mut().enumerate() {
-                                let e = &mr[M * tx..M * tx + A];
-                                *o = (0..A).map(|j| btk[j] * e[j]).sum();
+                            out.fill(0.0);
+                            for (j, &b) in btk.iter().enumerate() {
+                                if b != 0.0 {
+                                    let src = &mr[(j % M) * phase + j / M..][..tiles_x];
+                                    for (o, &e) in out.iter_mut().zip(src) {
+                                        *o += b * e;
+                                    }
+                                }
                             }
                         }
                     }
@@ -453,7 +469,8 @@ mod winograd {
 
         /// `Aᵀ m A` of one output channel's transformed tiles (`m[ξ·stride + t]`) of `rows` tile rows,
         /// plus `bias`, ReLU'd if asked, into `out` (that channel's output rows of the band,
-        /// `h_band × w`).
+        /// `h_band × w`). Both transforms run over all tiles of a tile row at once, and the output row is
+        /// gathered from its M phases last (the reverse of [`Self::transform_input`]'s split).
         #[allow(clippy::too_many_arguments)]
         fn transform_output(
             &self,
@@ -467,6 +484,8 @@ mod winograd {
         ) {
             // s = Aᵀ m: M rows of A columns, each a run over the tile row.
             let mut s = vec![0f32; M * A * tiles_x];
+            // One output row in phases: column M·tx + k is element tx of phase k.
+            let mut phases = vec![0f32; M * tiles_x];
             for tr in 0..rows {
                 let t0 = tr * tiles_x;
                 for (r, atr) in self.at.iter().enumerate() {
@@ -488,17 +507,22 @@ mod winograd {
                     if yy >= h_band {
                         break;
                     }
-                    let sr = &s[r * A * tiles_x..(r + 1) * A * tiles_x];
-                    let row = &mut out[yy * w..(yy + 1) * w];
-                    for tx in 0..tiles_x {
-                        let q: [f32; A] = std::array::from_fn(|k| sr[k * tiles_x + tx]);
-                        for (k, atk) in self.at.iter().enumerate() {
-                            let xx = M * tx + k;
-                            if xx < w {
-                                let val = (0..A).map(|j| atk[j] * q[j]).sum::<f32>() + bias;
-                                row[xx] = if relu { val.max(0.0) } else { val };
+                    // (Aᵀ m) A, plus the bias.
+                    for (k, atk) in self.at.iter().enumerate() {
+                        let dst = &mut phases[k * tiles_x..][..tiles_x];
+                        dst.fill(bias);
+                        for (j, &a) in atk.iter().enumerate() {
+                            if a != 0.0 {
+                                let src = &s[(r * A + j) * tiles_x..][..tiles_x];
+                                for (o, &e) in dst.iter_mut().zip(src) {
+                                    *o += a * e;
+                                }
                             }
                         }
+                    }
+                    for (xx, o) in out[yy * w..(yy + 1) * w].iter_mut().enumerate() {
+                        let val = phases[(xx % M) * tiles_x + xx / M];
+                        *o = if relu { val.max(0.0) } else { val };
                     }
                 }
             }

@@ -49,6 +49,7 @@ mod input;
 pub mod loss;
 mod net;
 mod patch_mlp;
+mod resample;
 pub mod transfer;
 mod tza;
 mod unet;

@@ -4,6 +4,7 @@
 use candle_core::{Device, Module, Result, Tensor, bail};
 
 use crate::conv::conv3x3;
+use crate::resample::{max_pool2, upsample2_cat};
 use candle_nn::{VarBuilder, VarMap};
 use serde::{Deserialize, Serialize};
 
@@ -351,7 +352,7 @@ impl Module for UNet {
                 x = conv.forward_relu(&x)?;
             }
             if level < 4 {
-                x = x.max_pool2d(2)?;
+                x = max_pool2(&x)?;
                 if level < 3 {
                     skips.push(x.clone());
                 }
@@ -359,10 +360,7 @@ impl Module for UNet {
         }
         for convs in &self.dec {
             let skip = skips.pop().expect("one skip per decoder level");
-            x = upsample2(&x)?;
-            if self.skips {
-                x = Tensor::cat(&[&x, &skip], 1)?;
-            }
+            x = if self.skips { upsample2_cat(&x, &skip)? } else { upsample2(&x)? };
             for conv in convs {
                 x = conv.forward_relu(&x)?;
             }
