@@ -8,6 +8,8 @@
 use candle_core::{CpuStorage, CustomOp1, CustomOp2, DType, Layout, Result, Shape, Tensor, bail};
 use rayon::prelude::*;
 
+use crate::conv::output_buffer;
+
 /// 2×2 max pooling with stride 2 of an NCHW tensor (odd trailing rows and columns are dropped, as in
 /// candle's `max_pool2d`). The gradient goes to the first maximum of each window in row-major order
 /// (PyTorch's choice; candle's own backward splits it among tied maxima).
@@ -50,7 +52,7 @@ impl CustomOp1 for MaxPool2 {
         let (n, c, h, w) = l.shape().dims4()?;
         let x = f32_data(s, l, "max_pool2 input")?;
         let (oh, ow) = (h / 2, w / 2);
-        let mut y = vec![0f32; n * c * oh * ow];
+        let mut y = output_buffer(n * c * oh * ow);
         if oh * ow > 0 {
             y.par_chunks_mut(oh * ow).zip(x.par_chunks(h * w)).for_each(|(out, plane)| {
                 for (oy, row) in out.chunks_mut(ow).enumerate() {
@@ -121,7 +123,7 @@ impl CustomOp2 for Upsample2Cat {
         let (low, skip) = (f32_data(s1, l1, "upsample2_cat input")?, f32_data(s2, l2, "upsample2_cat skip")?);
         let c = c1 + c2;
         let plane = oh * ow;
-        let mut y = vec![0f32; n * c * plane];
+        let mut y = output_buffer(n * c * plane);
         if plane > 0 {
             y.par_chunks_mut(plane).enumerate().for_each(|(p, out)| {
                 let (i, ch) = (p / c, p % c);
@@ -172,7 +174,7 @@ impl CustomOp1 for SumPool2 {
         let c1 = self.channels;
         let g = f32_data(s, l, "upsample2 gradient")?;
         let (oh, ow) = (h / 2, w / 2);
-        let mut dx = vec![0f32; n * c1 * oh * ow];
+        let mut dx = output_buffer(n * c1 * oh * ow);
         if oh * ow > 0 {
             dx.par_chunks_mut(oh * ow).enumerate().for_each(|(p, out)| {
                 let plane = &g[((p / c1) * c + p % c1) * h * w..][..h * w];
