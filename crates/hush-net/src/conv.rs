@@ -1,6 +1,7 @@
 //! 3×3 convolutions (stride 1, padding 1) with bias and an optional ReLU, on the CPU: Winograd's
-//! F(4×4, 3×3) where both channel counts are ≥ 16 ([`winograd`]), banded im2col + GEMM otherwise and for
-//! the weight gradient, with the bias and the activation fused in.
+//! F(4×4, 3×3) where both channel counts are ≥ 16 ([`winograd`]), for the forward pass and (by the
+//! transposed algorithm) the weight gradient; banded im2col + GEMM otherwise, with the bias and the
+//! activation fused in.
 //!
 //! The output rows are cut into bands (a few rows of every output channel); bands run in parallel, each
 //! one im2col copy of its rows (`9·C` rows of contiguous row copies, about 1 MiB, so it stays in cache)
@@ -10,9 +11,9 @@
 //! count. (Candle's own conv2d im2cols the whole image pixel by pixel, multiplies and then transposes
 //! the result into place: about 2–3× slower per layer here.)
 //!
-//! The weight gradient is the same GEMM the other way round, `[Co × band] · [band × 9C]`, summed over
-//! bands in a fixed order (deterministic again); the input gradient is the forward convolution of the
-//! output gradient with the kernel rotated by 180° and its in/out channels swapped.
+//! The im2col weight gradient is the same GEMM the other way round, `[Co × band] · [band × 9C]`, summed
+//! over bands in a fixed grouping and order (deterministic again); the input gradient is the forward
+//! convolution of the output gradient with the kernel rotated by 180° and its in/out channels swapped.
 //!
 //! Elsewhere (CUDA, other dtypes) [`conv3x3`] uses candle's own `conv2d`.
 
@@ -126,7 +127,12 @@ impl CustomOp2 for WeightGradOp {
             bail!("conv3x3: gradient {:?} does not fit input {:?}", l2.shape(), l1.shape())
         }
         let geom = Geometry { c, h, w };
-        let dw = weight_grad(&geom, n, f32_data(s1, l1, "input")?, f32_data(s2, l2, "gradient")?, co);
+        let (x, grad) = (f32_data(s1, l1, "input")?, f32_data(s2, l2, "gradient")?);
+        let dw = if use_winograd(c, co) {
+            winograd::F4.weight_grad(&geom, n, x, grad, co)
+        } else {
+            weight_grad(&geom, n, x, grad, co)
+        };
         Ok((CpuStorage::F32(dw), Shape::from((co, c, 3, 3))))
     }
 }
@@ -553,6 +559,149 @@ mod winograd {
             }
         }
 
+        /// `A z Aᵀ` of the output-gradient tiles of tile rows `ty0..ty0+rows` of one image (`co × H × W`):
+        /// `A² × co × tiles`, ξ-major, tile `t` covering rows `M·ty .. M·ty + M` and the same columns
+        /// (the output tile of [`Self::transform_input`]'s input tile), zero outside the image. Split by
+        /// phase as there, so that both transforms are sums of contiguous runs.
+        fn transform_gradient(
+            &self,
+            (co, h, w): (usize, usize, usize),
+            grad: &[f32],
+            (ty0, rows): (usize, usize),
+            tiles_x: usize,
+            out: &mut Vec<f32>,
+        ) {
+            let tiles = rows * tiles_x;
+            // Column M·tx + j is element tx of phase j; columns past the image stay zero.
+            let len = M * tiles_x;
+            out.resize(A * A * co * tiles, 0.0);
+            let mut z = vec![0f32; M * len];
+            let mut r = vec![0f32; A * len];
+            for o in 0..co {
+                let channel = &grad[o * h * w..(o + 1) * h * w];
+                for ty in ty0..ty0 + rows {
+                    for (i, row) in z.chunks_mut(len).enumerate() {
+                        let y = M * ty + i;
+                        if y < h {
+                            for (x, &e) in channel[y * w..(y + 1) * w].iter().enumerate() {
+                                row[(x % M) * tiles_x + x / M] = e;
+                            }
+                        } else {
+                            row.fill(0.0);
+                        }
+                    }
+                    // A z on whole (split) rows: row p is Σᵢ Aᵀ[i][p] zᵢ.
+                    for (p, rp) in r.chunks_mut(len).enumerate() {
+                        rp.fill(0.0);
+                        for (zi, ati) in z.chunks(len).zip(&self.at) {
+                            if ati[p] != 0.0 {
+                                for (o, &e) in rp.iter_mut().zip(zi) {
+                                    *o += ati[p] * e;
+                                }
+                            }
+                        }
+                    }
+                    // (A z) Aᵀ along the tile row, all tiles at once.
+                    let t0 = (ty - ty0) * tiles_x;
+                    for (p, rp) in r.chunks(len).enumerate() {
+                        for q in 0..A {
+                            let dst = &mut out[((p * A + q) * co + o) * tiles + t0..][..tiles_x];
+                            dst.fill(0.0);
+                            for (j, atj) in self.at.iter().enumerate() {
+                                if atj[q] != 0.0 {
+                                    for (d, &e) in dst.iter_mut().zip(&rp[j * tiles_x..][..tiles_x]) {
+                                        *d += atj[q] * e;
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+
+        /// The bands `(image, first tile row, tile rows)` of [`Self::weight_grad`]: transformed blocks of
+        /// about 2 MiB each, at least 4 bands per image where possible.
+        pub(super) fn grad_bands(&self, geom: &Geometry, n: usize, co: usize) -> Vec<(usize, usize, usize)> {
+            let (tiles_x, tiles_y) = (geom.w.div_ceil(M), geom.h.div_ceil(M));
+            let target_tiles = ((2usize << 20) / (4 * A * A * geom.c.max(co))).max(64);
+            bands(n, tiles_y, rows_per_band(target_tiles, tiles_x, tiles_y))
+        }
+
+        /// `dL/dW` (`co × C × 3 × 3`) as [`super::weight_grad`] computes it, by the transposed algorithm
+        /// F(3×3, M×M): per tile, `Gᵀ [(A z Aᵀ) ⊙ (Bᵀ d B)] G` for the output-gradient tile `z` and the
+        /// input tile `d` of the forward pass (the 1-D identity: `F(M, 3)` computes the trilinear form
+        /// `Σᵢₖ zᵢ gₖ dᵢ₊ₖ = Σ_ξ (A z)_ξ (G g)_ξ (Bᵀ d)_ξ`, whose derivative in `g` is this). The sums over
+        /// tiles are `A²` GEMMs `Z[ξ] (co × tiles) · V[ξ]ᵀ (tiles × C)` with the tiles as inner dimension,
+        /// accumulated per fixed group of bands and then summed in order (thread-count independent);
+        /// `Gᵀ · G` runs once per channel pair at the end. 4× fewer multiplications than im2col for F4.
+        pub(super) fn weight_grad(&self, geom: &Geometry, n: usize, x: &[f32], grad: &[f32], co: usize) -> Vec<f32> {
+            let (c, h, w) = (geom.c, geom.h, geom.w);
+            let tiles_x = w.div_ceil(M);
+            let bands = self.grad_bands(geom, n, co);
+            let per_group = bands.len().div_ceil(super::GRAD_GROUPS);
+            let partials: Vec<Vec<f32>> = bands
+                .par_chunks(per_group)
+                .map(|group| {
+                    let mut dw = vec![0f32; A * A * co * c];
+                    let (mut v, mut z) = (Vec::new(), Vec::new());
+                    for &(i, ty0, rows) in group {
+                        self.transform_input(
+                            geom,
+                            &x[i * c * h * w..(i + 1) * c * h * w],
+                            (ty0, rows),
+                            tiles_x,
+                            &mut v,
+                        );
+                        let g = &grad[i * co * h * w..(i + 1) * co * h * w];
+                        self.transform_gradient((co, h, w), g, (ty0, rows), tiles_x, &mut z);
+                        let tiles = rows * tiles_x;
+                        for xi in 0..A * A {
+                            // SAFETY: dw[ξ] is co × c (row-major), z[ξ] co × tiles (row-major) and v[ξ]
+                            // c × tiles, read transposed (row stride 1, column stride tiles); all inside
+                            // their buffers, dw owned by this group.
+                            #[allow(unsafe_code)]
+                            unsafe {
+                                sgemm(
+                                    (co, c, tiles),
+                                    dw.as_mut_ptr().add(xi * co * c),
+                                    c,
+                                    true,
+                                    z.as_ptr().add(xi * co * tiles),
+                                    tiles,
+                                    v.as_ptr().add(xi * c * tiles),
+                                    (1, tiles),
+                                );
+                            }
+                        }
+                    }
+                    dw
+                })
+                .collect();
+            let mut total = vec![0f32; A * A * co * c];
+            for p in &partials {
+                for (t, v) in total.iter_mut().zip(p) {
+                    *t += v;
+                }
+            }
+            // Gᵀ X G per (output, input) channel pair: dW[ky][kx] = Σ_pq G[p][ky] X[p][q] G[q][kx].
+            let pairs = co * c;
+            let mut dw = vec![0f32; pairs * 9];
+            for (pair, out) in dw.chunks_mut(9).enumerate() {
+                for (p, gp) in self.g.iter().enumerate() {
+                    for (q, gq) in self.g.iter().enumerate() {
+                        let e = total[(p * A + q) * pairs + pair];
+                        for ky in 0..3 {
+                            for kx in 0..3 {
+                                out[ky * 3 + kx] += gp[ky] * e * gq[kx];
+                            }
+                        }
+                    }
+                }
+            }
+            dw
+        }
+
         /// The forward convolution, as [`super::forward`] computes it.
         #[allow(clippy::too_many_arguments)]
         pub(super) fn forward(
@@ -720,7 +869,8 @@ mod tests {
                 Ok((y, dw))
             })
         };
-        assert!(Geometry { c: 16, h: 40, w: 24 }.bands(3).len() > GRAD_GROUPS, "the test must span several groups");
+        let geom = Geometry { c: 16, h: 40, w: 24 };
+        assert!(winograd::F4.grad_bands(&geom, 3, 17).len() > GRAD_GROUPS, "the test must span several groups");
         assert!(use_winograd(16, 17));
         assert_eq!(run(1)?, run(3)?);
         Ok(())
@@ -766,6 +916,31 @@ mod tests {
                 assert!(diff(&f2) < 2e-6, "F2 {:?} differs by {}", (n, c, co, h, w, relu), diff(&f2));
                 assert!(diff(&f4) < 2e-5, "F4 {:?} differs by {}", (n, c, co, h, w, relu), diff(&f4));
             }
+        }
+    }
+
+    /// The Winograd weight gradient (both variants) equals the im2col one, to f32 rounding of its
+    /// transforms, on sizes that are and are not multiples of the tile, one band and several groups.
+    #[test]
+    fn winograd_weight_grad_matches_im2col() {
+        let mut seed = 7u32;
+        let mut rnd = move || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as f32 / (1 << 24) as f32 - 0.5
+        };
+        for (n, c, co, h, w) in [(1, 16, 16, 1, 1), (2, 17, 20, 9, 6), (3, 32, 24, 40, 33), (1, 16, 16, 5, 3)] {
+            let geom = Geometry { c, h, w };
+            let x: Vec<f32> = (0..n * c * h * w).map(|_| rnd()).collect();
+            let grad: Vec<f32> = (0..n * co * h * w).map(|_| rnd()).collect();
+            let a = weight_grad(&geom, n, &x, &grad, co);
+            let scale = a.iter().fold(0f32, |m, v| m.max(v.abs()));
+            let diff = |b: &[f32]| a.iter().zip(b).map(|(p, q)| (p - q).abs()).fold(0f32, f32::max) / scale;
+            let f2 = winograd::F2.weight_grad(&geom, n, &x, &grad, co);
+            let f4 = winograd::F4.weight_grad(&geom, n, &x, &grad, co);
+            // As in `winograd_matches_im2col`: relative to the largest value, a few ulps of the sums for
+            // F(2×2), about 10× that for F(4×4)'s larger coefficients.
+            assert!(diff(&f2) < 2e-6, "F2 {:?} differs by {}", (n, c, co, h, w), diff(&f2));
+            assert!(diff(&f4) < 2e-5, "F4 {:?} differs by {}", (n, c, co, h, w), diff(&f4));
         }
     }
 
