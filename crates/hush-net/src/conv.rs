@@ -406,6 +406,18 @@ mod winograd {
         ],
     };
 
+    /// Splits an input row by phase: padded column `p = x + 1` goes to element `p div M` of phase `p mod M`
+    /// (phases `phase` apart in `row`). A strided copy per phase, without per-element index arithmetic.
+    fn split_row<const M: usize>(src: &[f32], row: &mut [f32], phase: usize) {
+        for (r, dst) in row.chunks_mut(phase).enumerate().take(M) {
+            // p = M·t + r, so x = M·t + r − 1: phase 0 starts at t = 1.
+            let (t0, x0) = if r == 0 { (1, M - 1) } else { (0, r - 1) };
+            for (d, &e) in dst[t0..].iter_mut().zip(src.iter().skip(x0).step_by(M)) {
+                *d = e;
+            }
+        }
+    }
+
     impl<const M: usize, const A: usize> Variant<M, A> {
         /// `G g Gᵀ` for every (output, input) channel pair: `A² × co × c`, ξ-major.
         fn transform_weights(&self, weight: &[f32], co: usize, c: usize) -> Vec<f32> {
@@ -450,23 +462,21 @@ mod winograd {
             let len = M * phase;
             // Every element is written below: resizing a reused buffer needs no clearing.
             v.resize(A * A * c * tiles, 0.0);
-            // Padding columns are never written, so they stay zero.
-            let mut d = vec![0f32; A * len];
+            // The band's input rows M·ty0 − 1 .. M·(ty0 + rows) + 1, each split once (neighbouring tile rows
+            // share two). Padding columns are never written, so they stay zero.
+            let band_rows = M * (rows - 1) + A;
+            let mut split = vec![0f32; band_rows * len];
             let mut m = vec![0f32; A * len];
             for ci in 0..c {
                 let channel = &image[ci * h * w..(ci + 1) * h * w];
-                for ty in ty0..ty0 + rows {
-                    for (r, row) in d.chunks_mut(len).enumerate() {
-                        match (M * ty + r).checked_sub(1).filter(|&y| y < h) {
-                            Some(y) => {
-                                for (x, &e) in channel[y * w..(y + 1) * w].iter().enumerate() {
-                                    let p = x + 1;
-                                    row[(p % M) * phase + p / M] = e;
-                                }
-                            }
-                            None => row.fill(0.0),
-                        }
+                for (r, row) in split.chunks_mut(len).enumerate() {
+                    match (M * ty0 + r).checked_sub(1).filter(|&y| y < h) {
+                        Some(y) => split_row::<M>(&channel[y * w..(y + 1) * w], row, phase),
+                        None => row.fill(0.0),
                     }
+                }
+                for ty in ty0..ty0 + rows {
+                    let d = &split[M * (ty - ty0) * len..][..A * len];
                     // Bᵀ d on whole (split) rows.
                     for (mr, btr) in m.chunks_mut(len).zip(&self.bt) {
                         mr.fill(0.0);
