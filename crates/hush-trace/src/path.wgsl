@@ -68,6 +68,8 @@ const T_MAX: f32 = 3.0e38;
 // Specialization (see bsdf.wgsl): textures and the environment.
 override HAS_TEXTURES: bool = true;
 override HAS_ENV: bool = true;
+// Few triangles: every ray tests all of them in order instead of walking the BVH.
+override FLAT_SCAN: bool = false;
 
 // ---- random numbers: PCG hash (Jarzynski & Olano 2020) ----
 
@@ -143,6 +145,17 @@ fn test_triangle(i: u32, o: vec3<f32>, d: vec3<f32>, hit: ptr<function, Hit>) {
 fn trace_ray(o: vec3<f32>, d: vec3<f32>, t_max: f32, any: bool) -> Hit {
     var hit = Hit(t_max, NO_HIT, 0.0, 0.0);
     if params.tri_count == 0u {
+        return hit;
+    }
+    if FLAT_SCAN {
+        // The same triangle index in every invocation: one load for the whole SIMD batch on CPU
+        // drivers (a BVH walk indexes per invocation) and broadcast reads on GPUs.
+        for (var k = 0u; k < params.tri_count; k++) {
+            test_triangle(k, o, d, &hit);
+            if any && hit.tri != NO_HIT {
+                return hit;
+            }
+        }
         return hit;
     }
     // Tiny direction components are replaced by ±1e-30 so that their reciprocals stay finite.

@@ -129,6 +129,7 @@ impl<'a> Renderer<'a> {
             ("HAS_ROUGH_DIELECTRIC", flag(features.rough_dielectric)),
             ("HAS_ROUGH_PLASTIC", flag(features.rough_plastic)),
             ("HAS_BECKMANN", flag(features.beckmann)),
+            ("FLAT_SCAN", flag(features.flat_scan)),
         ];
         let device = &self.gpu.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);

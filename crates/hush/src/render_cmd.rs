@@ -4,7 +4,7 @@ use anyhow::{Context, Result, bail};
 use glam::Vec3;
 use hush_dataset::{write_exr, write_png_preview};
 use hush_scene::Scene;
-use hush_trace::{GpuContext, RenderOutput, RenderSettings, Renderer};
+use hush_trace::{GpuContext, KernelFeatures, RenderOutput, RenderSettings, Renderer};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::cli::{RenderArgs, ViewOverrides};
@@ -116,6 +116,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let scene = load_scene(&args.scene, &args.view)?;
     let gpu = open_gpu()?;
     let renderer = Renderer::new(&gpu)?.with_generic_kernel(args.generic);
+    let kernel = if args.generic { KernelFeatures::ALL } else { KernelFeatures::of(&scene) };
+    eprintln!("scene: {} triangles; kernel: {kernel:?}", scene.triangle_count());
     let cpu0 = cpu_seconds();
     let out = render_with_progress(&renderer, &scene, &RenderSettings { spp, seed: args.seed }, time_limit, "render")?;
     let cpu = cpu_seconds() - cpu0;

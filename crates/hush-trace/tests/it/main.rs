@@ -376,13 +376,15 @@ fn time_limit_renders_whole_passes_up_to_the_spp_cap() {
 /// operations differently, and a last-bit difference can flip a Russian-roulette decision, so
 /// the check allows 2 % of the pixels to differ by more than 1e-4 (relative) and the image
 /// means to differ by 0.5 %; a kernel that dropped a used feature (here the rough plastic
-/// sphere and the textured floor) changes far more.
+/// sphere and the textured floor) changes far more. The textured scene also checks the flat
+/// triangle scan against the BVH walk.
 #[test]
 fn specialized_kernel_renders_what_the_generic_one_does() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/tests/mitsuba");
     for (name, expect) in [
         ("roughplastic", KernelFeatures { rough_plastic: true, ..KernelFeatures::NONE }),
-        ("textured", KernelFeatures { textures: true, ..KernelFeatures::NONE }),
+        // Few triangles: intersected by a flat scan instead of the BVH walk of the generic kernel.
+        ("textured", KernelFeatures { textures: true, flat_scan: true, ..KernelFeatures::NONE }),
         ("envmap", KernelFeatures { environment: true, ..KernelFeatures::NONE }),
     ] {
         let mut scene = Scene::load(&dir.join(name).join("scene.xml")).unwrap();
