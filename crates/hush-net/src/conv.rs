@@ -409,11 +409,97 @@ mod winograd {
     /// Splits an input row by phase: padded column `p = x + 1` goes to element `p div M` of phase `p mod M`
     /// (phases `phase` apart in `row`). A strided copy per phase, without per-element index arithmetic.
     fn split_row<const M: usize>(src: &[f32], row: &mut [f32], phase: usize) {
-        for (r, dst) in row.chunks_mut(phase).enumerate().take(M) {
-            // p = M·t + r, so x = M·t + r − 1: phase 0 starts at t = 1.
-            let (t0, x0) = if r == 0 { (1, M - 1) } else { (0, r - 1) };
-            for (d, &e) in dst[t0..].iter_mut().zip(src.iter().skip(x0).step_by(M)) {
-                *d = e;
+        // Tiles t0..t1 of every phase, one strided copy each.
+        let strided = |row: &mut [f32], t0: usize, t1: usize| {
+            for (r, dst) in row.chunks_mut(phase).enumerate().take(M) {
+                // p = M·t + r, so x = M·t + r − 1 (phase 0 has no tile 0 column: the padding).
+                let t0 = t0.max(usize::from(r == 0));
+                if t0 < t1 {
+                    let from = src.iter().skip(M * t0 + r - 1).step_by(M);
+                    for (d, &e) in dst[t0..t1].iter_mut().zip(from) {
+                        *d = e;
+                    }
+                }
+            }
+        };
+        // For F(4×4, 3×3), blocks of 16 tiles after the first: 64 columns read at once and shuffled
+        // into the four phases (vectorized). Block b covers x = 64b − 1 .. 64b + 63.
+        let mut blocks_end = 0;
+        if M == 4 {
+            let blocks = (1..phase / 16).take_while(|b| 64 * b + 63 <= src.len());
+            for b in blocks {
+                let block: &[f32; 64] = src[64 * b - 1..64 * b + 63].try_into().expect("64 columns");
+                for r in 0..4 {
+                    let dst: &mut [f32; 16] = (&mut row[r * phase + 16 * b..][..16]).try_into().expect("16 tiles");
+                    for (t, d) in dst.iter_mut().enumerate() {
+                        *d = block[4 * t + r];
+                    }
+                }
+                blocks_end = 16 * (b + 1);
+            }
+        }
+        if blocks_end > 0 {
+            strided(row, 0, 16);
+            strided(row, blocks_end, phase);
+        } else {
+            strided(row, 0, phase);
+        }
+    }
+
+    /// The inverse of [`split_row`] for an output row: column `M·t + k` from element `t` of phase `k`
+    /// (phases `phase` apart), ReLU'd if asked. For F(4×4, 3×3), 64 columns at a time from registers.
+    fn merge_row<const M: usize>(phases: &[f32], phase: usize, relu: bool, out: &mut [f32]) {
+        let act = |v: f32| if relu { v.max(0.0) } else { v };
+        let mut done = 0;
+        if M == 4 {
+            for (b, block) in out.chunks_exact_mut(64).enumerate() {
+                let p: [&[f32; 16]; 4] =
+                    std::array::from_fn(|k| phases[k * phase + 16 * b..][..16].try_into().expect("16 tiles"));
+                let block: &mut [f32; 64] = block.try_into().expect("64 columns");
+                for (x, o) in block.iter_mut().enumerate() {
+                    *o = act(p[x % 4][x / 4]);
+                }
+                done += 64;
+            }
+        }
+        for (x, o) in out.iter_mut().enumerate().skip(done) {
+            *o = act(phases[(x % M) * phase + x / M]);
+        }
+    }
+
+    /// `outs[k][i] = init + Σⱼ coef[k][j] · ins[j][i]` for `i < n`: one pass in which every output element
+    /// is computed from its inputs in registers, 16 elements at a time (one AVX-512 vector), zero
+    /// coefficients skipped. (A pass per coefficient, as sums of scaled runs, loads and stores each
+    /// output once per term: several times slower.)
+    fn combine<const I: usize, const O: usize>(
+        coef: &[[f32; I]; O],
+        ins: [&[f32]; I],
+        outs: &mut [&mut [f32]; O],
+        n: usize,
+        init: f32,
+    ) {
+        const L: usize = 16;
+        let full = n / L * L;
+        for i in (0..full).step_by(L) {
+            // Fixed-size copies: registers, not calls to memcpy.
+            let x: [[f32; L]; I] = std::array::from_fn(|j| ins[j][i..i + L].try_into().expect("L values"));
+            for (ck, out) in coef.iter().zip(outs.iter_mut()) {
+                let mut acc = [init; L];
+                for (&cj, xj) in ck.iter().zip(&x) {
+                    if cj != 0.0 {
+                        for (a, &e) in acc.iter_mut().zip(xj) {
+                            *a += cj * e;
+                        }
+                    }
+                }
+                let dst: &mut [f32; L] = (&mut out[i..i + L]).try_into().expect("L values");
+                *dst = acc;
+            }
+        }
+        for i in full..n {
+            for (ck, out) in coef.iter().zip(outs.iter_mut()) {
+                out[i] =
+                    init + ck.iter().zip(&ins).filter(|(c, _)| **c != 0.0).map(|(&c, src)| c * src[i]).sum::<f32>();
             }
         }
     }
@@ -478,31 +564,21 @@ mod winograd {
                 for ty in ty0..ty0 + rows {
                     let d = &split[M * (ty - ty0) * len..][..A * len];
                     // Bᵀ d on whole (split) rows.
-                    for (mr, btr) in m.chunks_mut(len).zip(&self.bt) {
-                        mr.fill(0.0);
-                        for (dr, &b) in d.chunks(len).zip(btr) {
-                            if b != 0.0 {
-                                for (o, &e) in mr.iter_mut().zip(dr) {
-                                    *o += b * e;
-                                }
-                            }
-                        }
-                    }
-                    // (Bᵀ d) B along the tile row, all tiles at once.
+                    let mut rows_out: [&mut [f32]; A] = {
+                        let mut it = m.chunks_mut(len);
+                        std::array::from_fn(|_| it.next().expect("A rows"))
+                    };
+                    combine(&self.bt, std::array::from_fn(|j| &d[j * len..(j + 1) * len]), &mut rows_out, len, 0.0);
+                    // (Bᵀ d) B along the tile row, all tiles at once: tile tx's column j is element
+                    // tx + j div M of phase j mod M.
                     let t0 = (ty - ty0) * tiles_x;
                     for (r, mr) in m.chunks(len).enumerate() {
-                        for (k, btk) in self.bt.iter().enumerate() {
-                            let out = &mut v[((r * A + k) * c + ci) * tiles + t0..][..tiles_x];
-                            out.fill(0.0);
-                            for (j, &b) in btk.iter().enumerate() {
-                                if b != 0.0 {
-                                    let src = &mr[(j % M) * phase + j / M..][..tiles_x];
-                                    for (o, &e) in out.iter_mut().zip(src) {
-                                        *o += b * e;
-                                    }
-                                }
-                            }
-                        }
+                        let ins: [&[f32]; A] = std::array::from_fn(|j| &mr[(j % M) * phase + j / M..][..tiles_x]);
+                        let mut outs: [&mut [f32]; A] = {
+                            let mut it = v[r * A * c * tiles..(r + 1) * A * c * tiles].chunks_mut(c * tiles);
+                            std::array::from_fn(|_| &mut it.next().expect("A blocks")[ci * tiles + t0..][..tiles_x])
+                        };
+                        combine(&self.bt, ins, &mut outs, tiles_x, 0.0);
                     }
                 }
             }
@@ -529,19 +605,14 @@ mod winograd {
             let mut phases = vec![0f32; M * tiles_x];
             for tr in 0..rows {
                 let t0 = tr * tiles_x;
-                for (r, atr) in self.at.iter().enumerate() {
-                    for k in 0..A {
-                        let dst = &mut s[(r * A + k) * tiles_x..][..tiles_x];
-                        dst.fill(0.0);
-                        for (j, &a) in atr.iter().enumerate() {
-                            if a != 0.0 {
-                                let src = &m[(j * A + k) * stride + t0..][..tiles_x];
-                                for (o, &e) in dst.iter_mut().zip(src) {
-                                    *o += a * e;
-                                }
-                            }
-                        }
-                    }
+                for k in 0..A {
+                    let ins: [&[f32]; A] = std::array::from_fn(|j| &m[(j * A + k) * stride + t0..][..tiles_x]);
+                    // Rows r·A + k of s, r < M.
+                    let mut outs: [&mut [f32]; M] = {
+                        let mut it = s.chunks_mut(tiles_x).skip(k).step_by(A);
+                        std::array::from_fn(|_| it.next().expect("M rows"))
+                    };
+                    combine(&self.at, ins, &mut outs, tiles_x, 0.0);
                 }
                 for r in 0..M {
                     let yy = M * tr + r;
@@ -549,22 +620,13 @@ mod winograd {
                         break;
                     }
                     // (Aᵀ m) A, plus the bias.
-                    for (k, atk) in self.at.iter().enumerate() {
-                        let dst = &mut phases[k * tiles_x..][..tiles_x];
-                        dst.fill(bias);
-                        for (j, &a) in atk.iter().enumerate() {
-                            if a != 0.0 {
-                                let src = &s[(r * A + j) * tiles_x..][..tiles_x];
-                                for (o, &e) in dst.iter_mut().zip(src) {
-                                    *o += a * e;
-                                }
-                            }
-                        }
-                    }
-                    for (xx, o) in out[yy * w..(yy + 1) * w].iter_mut().enumerate() {
-                        let val = phases[(xx % M) * tiles_x + xx / M];
-                        *o = if relu { val.max(0.0) } else { val };
-                    }
+                    let ins: [&[f32]; A] = std::array::from_fn(|j| &s[(r * A + j) * tiles_x..][..tiles_x]);
+                    let mut outs: [&mut [f32]; M] = {
+                        let mut it = phases.chunks_mut(tiles_x);
+                        std::array::from_fn(|_| it.next().expect("M phases"))
+                    };
+                    combine(&self.at, ins, &mut outs, tiles_x, bias);
+                    merge_row::<M>(&phases, tiles_x, relu, &mut out[yy * w..(yy + 1) * w]);
                 }
             }
         }
@@ -587,6 +649,8 @@ mod winograd {
             out.resize(A * A * co * tiles, 0.0);
             let mut z = vec![0f32; M * len];
             let mut r = vec![0f32; A * len];
+            // A = (Aᵀ)ᵀ, A × M.
+            let a: [[f32; M]; A] = std::array::from_fn(|p| std::array::from_fn(|i| self.at[i][p]));
             for o in 0..co {
                 let channel = &grad[o * h * w..(o + 1) * h * w];
                 for ty in ty0..ty0 + rows {
@@ -601,30 +665,20 @@ mod winograd {
                         }
                     }
                     // A z on whole (split) rows: row p is Σᵢ Aᵀ[i][p] zᵢ.
-                    for (p, rp) in r.chunks_mut(len).enumerate() {
-                        rp.fill(0.0);
-                        for (zi, ati) in z.chunks(len).zip(&self.at) {
-                            if ati[p] != 0.0 {
-                                for (o, &e) in rp.iter_mut().zip(zi) {
-                                    *o += ati[p] * e;
-                                }
-                            }
-                        }
-                    }
+                    let mut rows_out: [&mut [f32]; A] = {
+                        let mut it = r.chunks_mut(len);
+                        std::array::from_fn(|_| it.next().expect("A rows"))
+                    };
+                    combine(&a, std::array::from_fn(|i| &z[i * len..(i + 1) * len]), &mut rows_out, len, 0.0);
                     // (A z) Aᵀ along the tile row, all tiles at once.
                     let t0 = (ty - ty0) * tiles_x;
                     for (p, rp) in r.chunks(len).enumerate() {
-                        for q in 0..A {
-                            let dst = &mut out[((p * A + q) * co + o) * tiles + t0..][..tiles_x];
-                            dst.fill(0.0);
-                            for (j, atj) in self.at.iter().enumerate() {
-                                if atj[q] != 0.0 {
-                                    for (d, &e) in dst.iter_mut().zip(&rp[j * tiles_x..][..tiles_x]) {
-                                        *d += atj[q] * e;
-                                    }
-                                }
-                            }
-                        }
+                        let ins: [&[f32]; M] = std::array::from_fn(|j| &rp[j * tiles_x..][..tiles_x]);
+                        let mut outs: [&mut [f32]; A] = {
+                            let mut it = out[p * A * co * tiles..(p + 1) * A * co * tiles].chunks_mut(co * tiles);
+                            std::array::from_fn(|_| &mut it.next().expect("A blocks")[o * tiles + t0..][..tiles_x])
+                        };
+                        combine(&a, ins, &mut outs, tiles_x, 0.0);
                     }
                 }
             }
@@ -910,7 +964,9 @@ mod tests {
             seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
             (seed >> 8) as f32 / (1 << 24) as f32 - 0.5
         };
-        for (n, c, co, h, w) in [(1, 16, 16, 1, 1), (2, 17, 20, 9, 6), (1, 32, 24, 40, 33), (1, 16, 16, 5, 3)] {
+        for (n, c, co, h, w) in
+            [(1, 16, 16, 1, 1), (2, 17, 20, 9, 6), (1, 32, 24, 40, 33), (1, 16, 16, 5, 3), (1, 16, 16, 6, 150)]
+        {
             let geom = Geometry { c, h, w };
             let x: Vec<f32> = (0..n * c * h * w).map(|_| rnd()).collect();
             let weight: Vec<f32> = (0..co * c * 9).map(|_| rnd()).collect();
@@ -938,7 +994,9 @@ mod tests {
             seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
             (seed >> 8) as f32 / (1 << 24) as f32 - 0.5
         };
-        for (n, c, co, h, w) in [(1, 16, 16, 1, 1), (2, 17, 20, 9, 6), (3, 32, 24, 40, 33), (1, 16, 16, 5, 3)] {
+        for (n, c, co, h, w) in
+            [(1, 16, 16, 1, 1), (2, 17, 20, 9, 6), (3, 32, 24, 40, 33), (1, 16, 16, 5, 3), (1, 16, 16, 6, 150)]
+        {
             let geom = Geometry { c, h, w };
             let x: Vec<f32> = (0..n * c * h * w).map(|_| rnd()).collect();
             let grad: Vec<f32> = (0..n * co * h * w).map(|_| rnd()).collect();
