@@ -127,14 +127,14 @@ fn check_view_files(layout: &Layout, view: &ViewRecord, checked: &mut usize, pro
         for kind in AuxKind::OIDN {
             let beside = layout.path(&Layout::noisy_aux_name(&view.scene, &view.view, r.spp, kind));
             let source = layout.path(view.aux.file(kind));
-            if let (Ok(a), Ok(b)) = (std::fs::read(&beside), std::fs::read(&source)) {
-                if a != b {
-                    problems.push(format!(
-                        "{}: differs from {}; re-run `hush dataset` to re-link it",
-                        beside.display(),
-                        source.display()
-                    ));
-                }
+            if let (Ok(a), Ok(b)) = (std::fs::read(&beside), std::fs::read(&source))
+                && a != b
+            {
+                problems.push(format!(
+                    "{}: differs from {}; re-run `hush dataset` to re-link it",
+                    beside.display(),
+                    source.display()
+                ));
             }
         }
     }
@@ -184,10 +184,10 @@ pub fn temp_target(tmp_name: &str) -> Option<&str> {
 /// every write of this crate: `dst` is either the old file or the new one.
 pub fn link_or_copy(src: &Path, dst: &Path) -> crate::Result<()> {
     // Renaming a link over another link to the same file is a no-op that would leave the temporary behind.
-    if let (Ok(a), Ok(b)) = (std::fs::read(src), std::fs::read(dst)) {
-        if a == b {
-            return Ok(());
-        }
+    if let (Ok(a), Ok(b)) = (std::fs::read(src), std::fs::read(dst))
+        && a == b
+    {
+        return Ok(());
     }
     crate::write_atomic(dst, |tmp| {
         std::fs::hard_link(src, tmp)

@@ -911,10 +911,10 @@ impl Parser<'_, '_> {
     }
 
     fn check_unit(&self, node: Node, r: Reflectance, what: &str) -> Result<(), SceneError> {
-        if let Reflectance::Rgb(c) = r {
-            if c.min_element() < 0.0 || c.max_element() > 1.0 {
-                return Err(self.err(node, format!("{what} {c} is outside [0, 1]")));
-            }
+        if let Reflectance::Rgb(c) = r
+            && (c.min_element() < 0.0 || c.max_element() > 1.0)
+        {
+            return Err(self.err(node, format!("{what} {c} is outside [0, 1]")));
         }
         Ok(())
     }
@@ -993,10 +993,8 @@ impl Parser<'_, '_> {
                 if face_normals {
                     g.normals = None;
                 }
-                if !flip_tex_coords {
-                    if let Some(uvs) = &mut g.uvs {
-                        uvs.iter_mut().for_each(|uv| uv.y = 1.0 - uv.y);
-                    }
+                if !flip_tex_coords && let Some(uvs) = &mut g.uvs {
+                    uvs.iter_mut().for_each(|uv| uv.y = 1.0 - uv.y);
                 }
                 g
             }

@@ -9,7 +9,9 @@ use crate::ComplexIor;
 /// Source: Tungsten's `src/core/bsdfs/ComplexIorData.hpp` (B. Bitterli, github.com/tunabrain/tungsten),
 /// the measured spectra Mitsuba ships integrated against linear-sRGB colour matching. The shared
 /// scenes were exported with these numbers (e.g. veach-mis's plates are its "Cu", living-room's
-/// steel is its "Al"). Mitsuba's "none" (a perfect mirror) is handled by the caller.
+/// steel is its "Al"). Mitsuba's "none" (a perfect mirror) is handled by the caller. The digits are the
+/// source's, kept as printed there so that the table can be checked against it.
+#[allow(clippy::excessive_precision)]
 const CONDUCTORS: &[(&str, [f32; 3], [f32; 3])] = &[
     ("a-C", [2.9440999183, 2.2271502925, 1.9681668794], [0.8874329109, 0.7993216383, 0.8152862927]),
     ("Ag", [0.1552646489, 0.1167232965, 0.1383806959], [4.8283433224, 3.1222459278, 2.1469504455]),

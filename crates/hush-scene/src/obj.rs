@@ -33,13 +33,7 @@ pub(crate) fn read_obj(path: &Path, mtl: bool) -> Result<ObjFile, SceneError> {
         let hint = if path.exists() { e.to_string() } else { "mesh file not found".into() };
         SceneError::new(path, None, format!("{hint}: check the path in the scene file"))
     })?;
-    let options = tobj::LoadOptions {
-        single_index: true,
-        triangulate: true,
-        ignore_points: true,
-        ignore_lines: true,
-        ..Default::default()
-    };
+    let options = tobj::LoadOptions { single_index: true, triangulate: true, ignore_points: true, ignore_lines: true };
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
     let warnings = std::cell::RefCell::new(Vec::new());
     let (models, materials) = tobj::load_obj_buf(&mut BufReader::new(file), &options, |lib| {
@@ -247,12 +241,11 @@ pub(crate) fn mtl_material(
     if m.dissolve.is_some_and(|d| d < 1.0) {
         warnings.push(at("transparency (d < 1) is not supported yet: the surface is opaque".into()));
     }
-    for unsupported in
-        [&m.specular_texture, &m.normal_texture, &m.shininess_texture, &m.dissolve_texture, &m.ambient_texture]
+    for t in [&m.specular_texture, &m.normal_texture, &m.shininess_texture, &m.dissolve_texture, &m.ambient_texture]
+        .into_iter()
+        .flatten()
     {
-        if let Some(t) = unsupported {
-            warnings.push(at(format!("texture '{t}' is ignored (hush reads map_Kd only)")));
-        }
+        warnings.push(at(format!("texture '{t}' is ignored (hush reads map_Kd only)")));
     }
     let emission = m.emissive.map(Vec3::from).filter(|e| e.max_element() > 0.0);
     let ior = m.optical_density.filter(|n| *n > 0.0).unwrap_or(1.5);

@@ -173,10 +173,10 @@ impl Geometry {
                 return Err("normals and positions differ in number".into());
             }
         }
-        if let Some(uvs) = &self.uvs {
-            if let Some(k) = uvs.iter().position(|n| !n.is_finite()) {
-                return Err(format!("the texture coordinate of vertex {} is not finite", k + 1));
-            }
+        if let Some(uvs) = &self.uvs
+            && let Some(k) = uvs.iter().position(|n| !n.is_finite())
+        {
+            return Err(format!("the texture coordinate of vertex {} is not finite", k + 1));
         }
         let count = self.positions.len();
         if self.indices.iter().flatten().any(|&i| i as usize >= count) {

@@ -373,7 +373,7 @@ fn generate_view(ctx: &Ctx, job: &JobScene, v: u32) -> Result<(Camera, ViewGener
         probe.camera = camera;
         probe.film.width = pw;
         probe.film.height = ph;
-        let out = ctx.render(&probe, PROBE_SPP, seed ^ 0x5052_4f42_45 ^ attempt as u64, "probe")?;
+        let out = ctx.render(&probe, PROBE_SPP, seed ^ 0x0050_524f_4245 ^ attempt as u64, "probe")?;
         let lit = out.color.data.chunks_exact(3).filter(|p| luminance(p) > 0.0).count();
         let fraction = lit as f64 / (pw as f64 * ph as f64);
         if best.as_ref().is_none_or(|b| fraction > b.0) {
@@ -655,10 +655,10 @@ pub fn run(args: DatasetArgs) -> Result<()> {
     let prefixes: Vec<String> = jobs.iter().map(|&(s, v)| format!("{}_v{v:03}_", scenes[s].name)).collect();
     for tmp in temp_files(&out)? {
         let file = tmp.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-        if let Some(target) = temp_target(&file) {
-            if target == own_name || prefixes.iter().any(|p| target.starts_with(p.as_str())) {
-                std::fs::remove_file(&tmp).with_context(|| format!("removing {}", tmp.display()))?;
-            }
+        if let Some(target) = temp_target(&file)
+            && (target == own_name || prefixes.iter().any(|p| target.starts_with(p.as_str())))
+        {
+            std::fs::remove_file(&tmp).with_context(|| format!("removing {}", tmp.display()))?;
         }
     }
 

@@ -85,7 +85,7 @@ fn named_iors_and_metals() {
         matches!(s.meshes[0].material, hush_scene::Material::Dielectric { int_ior, ext_ior, .. } if int_ior == 1.333 && ext_ior == 1.00028)
     );
     let hush_scene::Material::Conductor { ior: Some(ior), .. } = s.meshes[1].material else { panic!() };
-    assert_eq!(ior.eta.x, 0.1431189557);
+    assert_eq!(ior.eta.x, 0.143_118_96);
 }
 
 #[test]

@@ -42,10 +42,10 @@ fn traverse(bvh: &Bvh, tris: &[[Vec3; 3]], o: Vec3, d: Vec3) -> Option<(f32, u32
         if n.count > 0 {
             for k in n.first..n.first + n.count {
                 let tri = bvh.order[k as usize];
-                if let Some(t) = hit(o, d, &tris[tri as usize]) {
-                    if best.is_none_or(|b| t < b.0) {
-                        best = Some((t, tri));
-                    }
+                if let Some(t) = hit(o, d, &tris[tri as usize])
+                    && best.is_none_or(|b| t < b.0)
+                {
+                    best = Some((t, tri));
                 }
             }
         } else {
@@ -59,10 +59,10 @@ fn traverse(bvh: &Bvh, tris: &[[Vec3; 3]], o: Vec3, d: Vec3) -> Option<(f32, u32
 fn brute(tris: &[[Vec3; 3]], o: Vec3, d: Vec3) -> Option<(f32, u32)> {
     let mut best: Option<(f32, u32)> = None;
     for (i, t) in tris.iter().enumerate() {
-        if let Some(dist) = hit(o, d, t) {
-            if best.is_none_or(|b| dist < b.0) {
-                best = Some((dist, i as u32));
-            }
+        if let Some(dist) = hit(o, d, t)
+            && best.is_none_or(|b| dist < b.0)
+        {
+            best = Some((dist, i as u32));
         }
     }
     best
