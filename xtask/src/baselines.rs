@@ -8,7 +8,7 @@
 use std::path::PathBuf;
 use std::process::Command;
 
-use crate::util::{Result, project_root, spawn, target_dir};
+use crate::util::{Result, ensure_venv, project_root, site_packages, spawn, target_dir};
 
 /// The one command that installs the baselines (also printed by hush-eval when one is missing).
 pub const SETUP: &str = "cargo xtask baselines setup";
@@ -27,7 +27,7 @@ fn venv_dir() -> PathBuf {
 
 /// The venv's Python, whether or not it is installed yet.
 pub fn venv_python() -> PathBuf {
-    venv_dir().join("bin").join("python")
+    crate::util::venv_python(&venv_dir())
 }
 
 fn requirements() -> PathBuf {
@@ -37,13 +37,7 @@ fn requirements() -> PathBuf {
 /// Creates the venv (if needed), installs the pinned packages and checks that they import.
 fn setup() -> Result<()> {
     let dir = venv_dir();
-    if !venv_python().is_file() {
-        let python = std::env::var("PYTHON").unwrap_or_else(|_| "python3".into());
-        spawn(Command::new(&python).args(["-m", "venv"]).arg(&dir)).map_err(|e| {
-            format!("{e}\n(a Python 3.9+ with venv is needed: on Debian `apt-get install -y python3-venv`)")
-        })?;
-    }
-    spawn(Command::new(venv_python()).args(["-m", "pip", "install", "--quiet", "--upgrade", "pip"]))?;
+    ensure_venv(&dir, "3.9+")?;
     spawn(Command::new(venv_python()).args(["-m", "pip", "install", "--quiet", "-r"]).arg(requirements()))?;
     spawn(Command::new(venv_python()).args([
         "-c",
@@ -84,11 +78,9 @@ fn check() -> Result<()> {
 
 /// `<venv>/lib/python3.*/site-packages/pyoidn/oidn`: OIDN's library as bundled by pyoidn.
 fn oidn_dir() -> Result<PathBuf> {
-    let lib = venv_dir().join("lib");
-    let entries = std::fs::read_dir(&lib).map_err(|e| format!("{}: {e}", lib.display()))?;
-    entries
-        .filter_map(|e| e.ok())
-        .map(|e| e.path().join("site-packages/pyoidn/oidn"))
-        .find(|p| p.join("lib").is_dir())
-        .ok_or_else(|| format!("pyoidn's bundled OIDN not found under {}: run `{SETUP}`", lib.display()))
+    let dir = site_packages(&venv_dir()).map_err(|e| format!("{e}: run `{SETUP}`"))?.join("pyoidn/oidn");
+    if !dir.join("lib").is_dir() {
+        return Err(format!("pyoidn's bundled OIDN not found in {}: run `{SETUP}`", dir.display()));
+    }
+    Ok(dir)
 }

@@ -4,6 +4,7 @@
 mod baselines;
 mod bench;
 mod bench_net;
+mod cuda_check;
 mod demo;
 mod eval;
 mod mitsuba;
@@ -45,6 +46,9 @@ tasks:
                              NaN/Inf; spread of mean luminance, material and light mix
   mitsuba setup              install Mitsuba 3 (PyPI) into target/mitsuba-venv and verify it renders
   mitsuba references         re-render the references of data/tests/mitsuba with Mitsuba 3
+  cuda-check                 check that the `cuda` feature compiles (hush, hush-net, hush-train, all targets)
+                             with NVIDIA's nvcc from PyPI in target/cuda-venv, into target/cuda-check; no GPU
+                             needed (heavy: 10 to 12 minutes cold on 2 cores; run by hand before releases)
 ";
 
 fn main() -> ExitCode {
@@ -59,6 +63,7 @@ fn main() -> ExitCode {
         Some("baselines") => baselines::run(&args[1..]),
         Some("sweep") => sweep::run(&args[1..]),
         Some("train-check") => train_check::run(&args[1..]),
+        Some("cuda-check") => cuda_check::run(&args[1..]),
         _ => Err(format!("{USAGE}{}", sweep::USAGE)),
     };
     match result {

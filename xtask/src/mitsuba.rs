@@ -9,7 +9,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use crate::util::{Result, is_root, project_root, spawn, target_dir};
+use crate::util::{Result, ensure_venv, is_root, project_root, spawn, target_dir, write_atomic};
 
 /// The Mitsuba release hush is measured against (PyPI `mitsuba`; it pins its `drjit`).
 pub const VERSION: &str = "3.9.1";
@@ -32,7 +32,7 @@ fn venv_dir() -> PathBuf {
 }
 
 fn venv_python() -> PathBuf {
-    venv_dir().join("bin").join("python")
+    crate::util::venv_python(&venv_dir())
 }
 
 /// Written last by `setup`, after a verified render: its presence means "installed and working".
@@ -108,13 +108,7 @@ fn ensure_libllvm19() -> Result<()> {
 fn setup() -> Result<()> {
     ensure_libllvm19()?;
     let dir = venv_dir();
-    if !venv_python().is_file() {
-        let python = std::env::var("PYTHON").unwrap_or_else(|_| "python3".into());
-        spawn(Command::new(&python).args(["-m", "venv"]).arg(&dir)).map_err(|e| {
-            format!("{e}\n(a Python 3.8+ with venv is needed: on Debian `apt-get install -y python3-venv`)")
-        })?;
-    }
-    spawn(Command::new(venv_python()).args(["-m", "pip", "install", "--quiet", "--upgrade", "pip"]))?;
+    ensure_venv(&dir, "3.8+")?;
     spawn(Command::new(venv_python()).args([
         "-m",
         "pip",
@@ -142,7 +136,7 @@ fn setup() -> Result<()> {
         cmd.arg("--ref").arg(r);
     }
     spawn(&mut cmd)?;
-    std::fs::write(marker(), format!("mitsuba {VERSION}\n")).map_err(|e| format!("{}: {e}", marker().display()))?;
+    write_atomic(&marker(), &format!("mitsuba {VERSION}\n"))?;
     println!("Mitsuba {VERSION} (llvm_ad_rgb) installed in {} and verified", dir.display());
     Ok(())
 }

@@ -127,11 +127,83 @@ pub fn read_json(path: &Path) -> Result<serde_json::Value> {
 
 /// Writes a JSON file (temp + rename).
 pub fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
+    write_atomic(path, &serde_json::to_string_pretty(value).expect("JSON values serialize"))
+}
+
+/// Writes a text file through a temporary name and a rename, creating its folder: a killed process never
+/// leaves a partial file.
+pub fn write_atomic(path: &Path, text: &str) -> Result<()> {
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     }
-    let tmp = path.with_extension("json.tmp");
-    let text = serde_json::to_string_pretty(value).expect("JSON values serialize");
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = PathBuf::from(tmp);
     std::fs::write(&tmp, text).map_err(|e| format!("{}: {e}", tmp.display()))?;
     std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// A Python venv's interpreter.
+pub fn venv_python(venv: &Path) -> PathBuf {
+    venv.join("bin").join("python")
+}
+
+/// Creates the Python venv `venv` when it has no interpreter yet (with `$PYTHON`, else `python3`; `min_python`
+/// names the version the packages need, for the error message), brings its pip up to date and returns the
+/// venv's interpreter.
+pub fn ensure_venv(venv: &Path, min_python: &str) -> Result<PathBuf> {
+    let python = venv_python(venv);
+    if !python.is_file() {
+        let system = std::env::var("PYTHON").unwrap_or_else(|_| "python3".into());
+        spawn(Command::new(&system).args(["-m", "venv"]).arg(venv)).map_err(|e| {
+            format!("{e}\n(a Python {min_python} with venv is needed: on Debian `apt-get install -y python3-venv`)")
+        })?;
+    }
+    spawn(Command::new(&python).args(["-m", "pip", "install", "--quiet", "--upgrade", "pip"]))?;
+    Ok(python)
+}
+
+/// The `site-packages` folder of a venv (`<venv>/lib/python3.X/site-packages`), where pip put the packages.
+pub fn site_packages(venv: &Path) -> Result<PathBuf> {
+    let lib = venv.join("lib");
+    let entries = std::fs::read_dir(&lib).map_err(|e| format!("{}: {e}", lib.display()))?;
+    entries
+        .filter_map(|e| e.ok())
+        .map(|e| e.path().join("site-packages"))
+        .find(|p| p.is_dir())
+        .ok_or_else(|| format!("no lib/python3.*/site-packages in the venv {}", venv.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scratch(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("xtask-util-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    #[test]
+    fn site_packages_is_found_whatever_the_python_version_and_its_absence_names_the_venv() {
+        let venv = scratch("venv");
+        let err = site_packages(&venv).unwrap_err();
+        assert!(err.contains(&venv.display().to_string()), "{err}");
+        std::fs::create_dir_all(venv.join("lib/python3.13/site-packages")).unwrap();
+        assert_eq!(site_packages(&venv).unwrap(), venv.join("lib/python3.13/site-packages"));
+        std::fs::remove_dir_all(&venv).unwrap();
+    }
+
+    #[test]
+    fn write_atomic_creates_the_folder_replaces_the_file_and_leaves_no_temporary() {
+        let dir = scratch("atomic");
+        let path = dir.join("sub/marker.ok");
+        write_atomic(&path, "first").unwrap();
+        write_atomic(&path, "second").unwrap();
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "second");
+        let names: Vec<_> = std::fs::read_dir(dir.join("sub")).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(names, ["marker.ok"]);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }

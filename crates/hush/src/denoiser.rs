@@ -20,11 +20,10 @@ pub fn aux_of(view: &hush_dataset::ViewImages, f: Feature) -> &Image {
 /// The device Candle runs on: the first CUDA device when built with `cuda`, else the CPU.
 pub fn device() -> Result<Device> {
     #[cfg(feature = "cuda")]
-    {
-        return Ok(Device::new_cuda(0)?);
-    }
+    let device = Device::new_cuda(0)?;
     #[cfg(not(feature = "cuda"))]
-    Ok(Device::Cpu)
+    let device = Device::Cpu;
+    Ok(device)
 }
 
 pub struct Denoiser {
