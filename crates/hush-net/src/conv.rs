@@ -52,9 +52,9 @@ struct Conv3x3Op {
 struct WeightGradOp;
 
 /// The contiguous f32 data of a CPU tensor argument.
-fn f32_data<'a>(storage: &'a CpuStorage, layout: &Layout, what: &str) -> Result<&'a [f32]> {
-    let CpuStorage::F32(data) = storage else { bail!("conv3x3: {what} must be f32") };
-    let Some((start, end)) = layout.contiguous_offsets() else { bail!("conv3x3: {what} must be contiguous") };
+pub(crate) fn f32_data<'a>(storage: &'a CpuStorage, layout: &Layout, what: &str) -> Result<&'a [f32]> {
+    let CpuStorage::F32(data) = storage else { bail!("{what} must be f32") };
+    let Some((start, end)) = layout.contiguous_offsets() else { bail!("{what} must be contiguous") };
     Ok(&data[start..end])
 }
 
@@ -73,11 +73,20 @@ impl CustomOp3 for Conv3x3Op {
         l3: &Layout,
     ) -> Result<(CpuStorage, Shape)> {
         let (n, c, h, w) = l1.shape().dims4()?;
-        let co = l2.shape().dims()[0];
+        let (co, wc, kh, kw) = l2.shape().dims4()?;
+        // The output is written in full (it is not cleared first) only for weights and a bias that fit.
+        if (wc, kh, kw) != (c, 3, 3) || l3.shape().dims1()? != co {
+            bail!(
+                "conv3x3: input {:?}, weight {:?}, bias {:?} do not fit a 3x3 convolution",
+                l1.shape(),
+                l2.shape(),
+                l3.shape()
+            )
+        }
         let geom = Geometry { c, h, w };
-        let x = f32_data(s1, l1, "input")?;
-        let weight = f32_data(s2, l2, "weight")?;
-        let bias = f32_data(s3, l3, "bias")?;
+        let x = f32_data(s1, l1, "conv3x3 input")?;
+        let weight = f32_data(s2, l2, "conv3x3 weight")?;
+        let bias = f32_data(s3, l3, "conv3x3 bias")?;
         let y = if use_winograd(c, co) {
             winograd::F4.forward(&geom, n, x, weight, bias, co, self.relu)
         } else {
@@ -127,7 +136,7 @@ impl CustomOp2 for WeightGradOp {
             bail!("conv3x3: gradient {:?} does not fit input {:?}", l2.shape(), l1.shape())
         }
         let geom = Geometry { c, h, w };
-        let (x, grad) = (f32_data(s1, l1, "input")?, f32_data(s2, l2, "gradient")?);
+        let (x, grad) = (f32_data(s1, l1, "conv3x3 input")?, f32_data(s2, l2, "conv3x3 gradient")?);
         let dw = if use_winograd(c, co) {
             winograd::F4.weight_grad(&geom, n, x, grad, co)
         } else {
@@ -147,7 +156,7 @@ impl CustomOp2 for ReluGradOp {
     }
 
     fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
-        let (grad, y) = (f32_data(s1, l1, "gradient")?, f32_data(s2, l2, "output")?);
+        let (grad, y) = (f32_data(s1, l1, "relu gradient")?, f32_data(s2, l2, "relu output")?);
         if grad.len() != y.len() {
             bail!("relu gradient: {:?} does not fit {:?}", l1.shape(), l2.shape())
         }
@@ -168,7 +177,7 @@ impl candle_core::CustomOp1 for ChannelSumOp {
     fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
         let (_, co, h, w) = l.shape().dims4()?;
         let mut sums = vec![0f32; co];
-        for (plane, values) in f32_data(s, l, "gradient")?.chunks(h * w).enumerate() {
+        for (plane, values) in f32_data(s, l, "bias gradient")?.chunks(h * w).enumerate() {
             sums[plane % co] += values.iter().sum::<f32>();
         }
         Ok((CpuStorage::F32(sums), Shape::from(co)))
@@ -255,14 +264,15 @@ impl SharedMut {
 }
 
 /// A buffer of `len` values for an output that the caller writes in full before anything reads it: no
-/// clearing pass over memory that is about to be overwritten.
-/// Measured: 512² `unet` inference 0.52–0.56 s with zeroed outputs, 0.50–0.51 s with these (alternating,
-/// idle).
+/// clearing pass over memory that is about to be overwritten. Measured with `hush bench inference`
+/// (512² `unet`, 2 threads, alternating, idle): 0.52–0.56 s with zeroed outputs, 0.50–0.51 s with these.
 #[allow(unsafe_code, clippy::uninit_vec)]
 pub(crate) fn output_buffer(len: usize) -> Vec<f32> {
     let mut v = Vec::with_capacity(len);
-    // SAFETY: f32 has no invalid bit patterns, and every caller overwrites each element before any is read
-    // (as candle's CPU backend does with its own uninitialized outputs).
+    // SAFETY: the elements are uninitialized. That is sound only because every caller writes each of them
+    // before anything reads it: the convolutions (after checking that weight and bias fit) write every
+    // output row of every channel once, the resampling ops every output element (after checking shapes).
+    // Candle's CPU backend allocates its own outputs the same way.
     unsafe { v.set_len(len) };
     v
 }
@@ -319,23 +329,21 @@ fn forward(geom: &Geometry, n: usize, x: &[f32], weight: &[f32], bias: &[f32], c
     let mut y = output_buffer(n * co * h * w);
     let out = SharedMut(y.as_mut_ptr());
     geom.bands(n).into_par_iter().for_each_init(Vec::new, |cols_buf, (i, y0, rows)| {
-        {
-            geom.im2col(&x[i * c * h * w..(i + 1) * c * h * w], y0, rows, cols_buf);
-            let cols = rows * w;
-            #[allow(unsafe_code)]
-            // SAFETY: the destination is image i's rows y0..y0+rows of every output channel (row stride H·W
-            // between channels), inside `y` and touched by no other band; `weight` is co × 9c and `cols_buf`
-            // 9c × cols, both row-major.
-            unsafe {
-                let dst = out.get().add(i * co * h * w + y0 * w);
-                sgemm((co, cols, 9 * c), dst, h * w, false, weight.as_ptr(), 9 * c, cols_buf.as_ptr(), (cols, 1));
-                for (o, &b) in bias.iter().enumerate() {
-                    let band = std::slice::from_raw_parts_mut(dst.add(o * h * w), cols);
-                    for v in band {
-                        *v += b;
-                        if relu {
-                            *v = v.max(0.0);
-                        }
+        geom.im2col(&x[i * c * h * w..(i + 1) * c * h * w], y0, rows, cols_buf);
+        let cols = rows * w;
+        #[allow(unsafe_code)]
+        // SAFETY: the destination is image i's rows y0..y0+rows of every output channel (row stride H·W
+        // between channels), inside `y` and touched by no other band; `weight` is co × 9c and `cols_buf`
+        // 9c × cols, both row-major.
+        unsafe {
+            let dst = out.get().add(i * co * h * w + y0 * w);
+            sgemm((co, cols, 9 * c), dst, h * w, false, weight.as_ptr(), 9 * c, cols_buf.as_ptr(), (cols, 1));
+            for (o, &b) in bias.iter().enumerate() {
+                let band = std::slice::from_raw_parts_mut(dst.add(o * h * w), cols);
+                for v in band {
+                    *v += b;
+                    if relu {
+                        *v = v.max(0.0);
                     }
                 }
             }
@@ -344,8 +352,9 @@ fn forward(geom: &Geometry, n: usize, x: &[f32], weight: &[f32], bias: &[f32], c
     y
 }
 
-/// Whether the forward pass takes [`winograd`] (F(4×4, 3×3)): it does 4× fewer multiplications, but its GEMMs have
-/// only `C` (not `9·C`) as inner dimension, which is inefficient for the first layers' few channels.
+/// Whether a layer's convolutions (forward, and so the input gradient, and the weight gradient) take
+/// [`winograd`] (F(4×4, 3×3)): 4× fewer multiplications, but GEMMs with only `C` (not `9·C`) as inner
+/// dimension in the forward pass, which is inefficient for the first layers' few channels.
 fn use_winograd(c: usize, co: usize) -> bool {
     c >= WINOGRAD_MIN_CHANNELS && co >= WINOGRAD_MIN_CHANNELS
 }
@@ -468,8 +477,8 @@ mod winograd {
     }
 
     /// `outs[k][i] = init + Σⱼ coef[k][j] · ins[j][i]` for `i < n`: one pass in which every output element
-    /// is computed from its inputs in registers, 16 elements at a time (one AVX-512 vector), zero
-    /// coefficients skipped. (A pass per coefficient, as sums of scaled runs, loads and stores each
+    /// is computed from its inputs in registers, 16 elements at a time (fixed-size arrays the compiler keeps
+    /// in vector registers), zero coefficients skipped. (A pass per coefficient, as sums of scaled runs, loads and stores each
     /// output once per term: several times slower.)
     fn combine<const I: usize, const O: usize>(
         coef: &[[f32; I]; O],
@@ -955,18 +964,31 @@ mod tests {
         Ok(())
     }
 
+    /// Reproducible values in [−0.5, 0.5).
+    fn uniform(seed: u64) -> impl FnMut() -> f32 {
+        let mut rng = crate::unet::SplitMix64(seed);
+        move || rng.next_f64() as f32 - 0.5
+    }
+
+    /// (images, input channels, output channels, height, width) for the Winograd tests: one pixel, sizes
+    /// that are and are not multiples of the tile, several bands and groups (3 × 40 rows), and 150 and 190
+    /// columns, which reach the 64-column block paths of the row split and merge.
+    const WINOGRAD_SHAPES: [(usize, usize, usize, usize, usize); 6] = [
+        (1, 16, 16, 1, 1),
+        (2, 17, 20, 9, 6),
+        (3, 32, 24, 40, 33),
+        (1, 16, 16, 5, 3),
+        (1, 16, 16, 6, 150),
+        // The second block would need 191 columns: the strided copy takes the rest of the row.
+        (1, 16, 16, 5, 190),
+    ];
+
     /// Both Winograd variants give the im2col path's values (to f32 rounding of their transforms) on
     /// sizes that are and are not multiples of the tile, one tile row and several bands.
     #[test]
     fn winograd_matches_im2col() {
-        let mut seed = 1u32;
-        let mut rnd = move || {
-            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-            (seed >> 8) as f32 / (1 << 24) as f32 - 0.5
-        };
-        for (n, c, co, h, w) in
-            [(1, 16, 16, 1, 1), (2, 17, 20, 9, 6), (1, 32, 24, 40, 33), (1, 16, 16, 5, 3), (1, 16, 16, 6, 150)]
-        {
+        let mut rnd = uniform(1);
+        for (n, c, co, h, w) in WINOGRAD_SHAPES {
             let geom = Geometry { c, h, w };
             let x: Vec<f32> = (0..n * c * h * w).map(|_| rnd()).collect();
             let weight: Vec<f32> = (0..co * c * 9).map(|_| rnd()).collect();
@@ -989,14 +1011,8 @@ mod tests {
     /// transforms, on sizes that are and are not multiples of the tile, one band and several groups.
     #[test]
     fn winograd_weight_grad_matches_im2col() {
-        let mut seed = 7u32;
-        let mut rnd = move || {
-            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-            (seed >> 8) as f32 / (1 << 24) as f32 - 0.5
-        };
-        for (n, c, co, h, w) in
-            [(1, 16, 16, 1, 1), (2, 17, 20, 9, 6), (3, 32, 24, 40, 33), (1, 16, 16, 5, 3), (1, 16, 16, 6, 150)]
-        {
+        let mut rnd = uniform(7);
+        for (n, c, co, h, w) in WINOGRAD_SHAPES {
             let geom = Geometry { c, h, w };
             let x: Vec<f32> = (0..n * c * h * w).map(|_| rnd()).collect();
             let grad: Vec<f32> = (0..n * co * h * w).map(|_| rnd()).collect();

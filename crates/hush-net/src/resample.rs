@@ -1,44 +1,66 @@
 //! The U-Net's 2×2 max pooling and its decoder input (nearest ×2 upsampling concatenated with the skip
 //! tensor), as single CPU passes that run over image planes in parallel, with their gradients.
 //!
-//! Candle's `max_pool2d`, a broadcast upsampling and `Tensor::cat` walk strided indices on one thread: about
-//! a tenth of a 512² inference here, while the convolutions run on every core. Elsewhere (CUDA, other
-//! dtypes) the functions below use those candle ops.
+//! Candle's `max_pool2d`, a broadcast upsampling and `Tensor::cat` walk strided indices on one thread, while
+//! the convolutions run on every core (512² `unet` inference, `hush bench inference`, 2 threads, idle:
+//! 0.67–0.69 s with them, 0.53–0.56 s with these). Elsewhere (CUDA, other dtypes) the functions below are
+//! built from candle ops with the same values and gradients.
 
 use candle_core::{CpuStorage, CustomOp1, CustomOp2, DType, Layout, Result, Shape, Tensor, bail};
 use rayon::prelude::*;
 
-use crate::conv::output_buffer;
+use crate::conv::{f32_data, output_buffer};
 
 /// 2×2 max pooling with stride 2 of an NCHW tensor (odd trailing rows and columns are dropped, as in
-/// candle's `max_pool2d`). The gradient goes to the first maximum of each window in row-major order
-/// (PyTorch's choice; candle's own backward splits it among tied maxima).
+/// candle's `max_pool2d`). The gradient goes to the maximum of each window: on the CPU to the first of tied
+/// maxima in row-major order (PyTorch's choice), elsewhere to each of them. (Candle 0.11's own
+/// `max_pool2d` backward multiplies by the share of maxima in the window, 1/4 without ties, where it
+/// should divide by their count; neither path uses it.)
 pub fn max_pool2(x: &Tensor) -> Result<Tensor> {
-    if x.device().is_cpu() && x.dtype() == DType::F32 { x.contiguous()?.apply_op1(MaxPool2) } else { x.max_pool2d(2) }
+    if x.device().is_cpu() && x.dtype() == DType::F32 {
+        x.contiguous()?.apply_op1(MaxPool2)
+    } else {
+        max_pool2_reduce(x)
+    }
+}
+
+/// [`max_pool2`] from candle's max reductions over the window axes, whose backward passes the gradient
+/// to the elements equal to the maximum.
+fn max_pool2_reduce(x: &Tensor) -> Result<Tensor> {
+    let (n, c, h, w) = x.dims4()?;
+    let (oh, ow) = (h / 2, w / 2);
+    let x = x.narrow(2, 0, 2 * oh)?.narrow(3, 0, 2 * ow)?.contiguous()?;
+    x.reshape((n, c, oh, 2, ow, 2))?.max_keepdim(5)?.max_keepdim(3)?.reshape((n, c, oh, ow))
+}
+
+/// Nearest-neighbour ×2 upsampling from reshape + broadcast, whose gradients are plain sums.
+/// (`Tensor::upsample_nearest2d`'s backward is a grouped convolution with one group per channel,
+/// slow on the CPU, and it overwrites rather than accumulates its input's gradient.)
+pub fn upsample2(x: &Tensor) -> Result<Tensor> {
+    let (n, c, h, w) = x.dims4()?;
+    x.reshape((n, c, h, 1, w, 1))?.broadcast_as((n, c, h, 2, w, 2))?.reshape((n, c, 2 * h, 2 * w))
 }
 
 /// `[upsample2(low), skip]` along the channels: nearest-neighbour ×2 upsampling of `low` (`N × C1 × H × W`)
 /// concatenated with `skip` (`N × C2 × 2H × 2W`).
 pub fn upsample2_cat(low: &Tensor, skip: &Tensor) -> Result<Tensor> {
-    let (n, c1, h, w) = low.dims4()?;
-    let (sn, _, sh, sw) = skip.dims4()?;
-    if (sn, sh, sw) != (n, 2 * h, 2 * w) {
-        bail!("upsample2_cat: skip {:?} does not fit twice the size of {:?}", skip.dims(), low.dims())
-    }
+    check_upsample2_cat(low.shape(), skip.shape())?;
     let cpu_f32 = low.device().is_cpu() && low.dtype() == DType::F32 && skip.dtype() == DType::F32;
     if cpu_f32 {
         low.contiguous()?.apply_op2(&skip.contiguous()?, Upsample2Cat)
     } else {
-        let up = low.reshape((n, c1, h, 1, w, 1))?.broadcast_as((n, c1, h, 2, w, 2))?.reshape((n, c1, 2 * h, 2 * w))?;
-        Tensor::cat(&[&up, skip], 1)
+        Tensor::cat(&[&upsample2(low)?, skip], 1)
     }
 }
 
-/// The contiguous f32 data of a CPU tensor argument.
-fn f32_data<'a>(storage: &'a CpuStorage, layout: &Layout, what: &str) -> Result<&'a [f32]> {
-    let CpuStorage::F32(data) = storage else { bail!("{what} must be f32") };
-    let Some((start, end)) = layout.contiguous_offsets() else { bail!("{what} must be contiguous") };
-    Ok(&data[start..end])
+/// `skip` must be as many images of twice the height and width of `low`.
+fn check_upsample2_cat(low: &Shape, skip: &Shape) -> Result<()> {
+    let (n, _, h, w) = low.dims4()?;
+    let (sn, _, sh, sw) = skip.dims4()?;
+    if (sn, sh, sw) != (n, 2 * h, 2 * w) {
+        bail!("upsample2_cat: skip {:?} does not fit twice the size of {:?}", skip.dims(), low.dims())
+    }
+    Ok(())
 }
 
 struct MaxPool2;
@@ -118,6 +140,8 @@ impl CustomOp2 for Upsample2Cat {
     }
 
     fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
+        // The output is written in full only for a skip of the right size.
+        check_upsample2_cat(l1.shape(), l2.shape())?;
         let (n, c1, h, w) = l1.shape().dims4()?;
         let (_, c2, oh, ow) = l2.shape().dims4()?;
         let (low, skip) = (f32_data(s1, l1, "upsample2_cat input")?, f32_data(s2, l2, "upsample2_cat skip")?);
@@ -219,11 +243,29 @@ mod tests {
                 for (oy, ox) in (0..oh).flat_map(|oy| (0..ow).map(move |ox| (oy, ox))) {
                     let window = [(0, 0), (0, 1), (1, 0), (1, 1)]
                         .map(|(dy, dx)| plane * h * w + (2 * oy + dy) * w + 2 * ox + dx);
-                    let best = window.into_iter().max_by(|&a, &b| xs[a].total_cmp(&xs[b])).expect("four");
+                    // The first maximum: a later element must be strictly greater to win.
+                    let best = window.into_iter().reduce(|a, b| if xs[b] > xs[a] { b } else { a }).expect("four");
                     want[best] = ps[(plane * oh + oy) * ow + ox];
                 }
             }
             assert_eq!(got, want, "gradient for {:?}", (n, c, h, w));
+        }
+        Ok(())
+    }
+
+    /// The candle-ops path (other devices) has the CPU op's values and gradient (no ties in random data).
+    #[test]
+    fn max_pool2_from_reductions_matches_the_cpu_op() -> Result<()> {
+        let dev = Device::Cpu;
+        for dims in [(2, 3, 4, 6), (1, 2, 5, 7)] {
+            let x = Var::from_tensor(&Tensor::randn(0f32, 1.0, dims, &dev)?)?;
+            let (ours, reduced) = (max_pool2(&x)?, max_pool2_reduce(&x)?);
+            assert_eq!(max_diff(&ours, &reduced)?, 0.0, "values for {dims:?}");
+            let probe = Tensor::randn(0f32, 1.0, ours.dims(), &dev)?;
+            let g_ours = (ours * &probe)?.sum_all()?.backward()?;
+            let g_reduced = (reduced * &probe)?.sum_all()?.backward()?;
+            let (a, b) = (g_ours.get(&x).expect("grad"), g_reduced.get(&x).expect("grad"));
+            assert_eq!(max_diff(a, b)?, 0.0, "gradient for {dims:?}");
         }
         Ok(())
     }
@@ -247,8 +289,7 @@ mod tests {
             let low = Var::from_tensor(&Tensor::randn(0f32, 1.0, (n, c1, h, w), &dev)?)?;
             let skip = Var::from_tensor(&Tensor::randn(0f32, 1.0, (n, c2, 2 * h, 2 * w), &dev)?)?;
             let ours = upsample2_cat(&low, &skip)?;
-            let up = low.reshape((n, c1, h, 1, w, 1))?.broadcast_as((n, c1, h, 2, w, 2))?;
-            let theirs = Tensor::cat(&[&up.reshape((n, c1, 2 * h, 2 * w))?, skip.as_tensor()], 1)?;
+            let theirs = Tensor::cat(&[&upsample2(&low)?, skip.as_tensor()], 1)?;
             assert_eq!(max_diff(&ours, &theirs)?, 0.0);
             let probe = Tensor::randn(0f32, 1.0, ours.dims(), &dev)?;
             let g_ours = (ours * &probe)?.sum_all()?.backward()?;

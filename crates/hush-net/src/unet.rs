@@ -4,7 +4,7 @@
 use candle_core::{Device, Module, Result, Tensor, bail};
 
 use crate::conv::conv3x3;
-use crate::resample::{max_pool2, upsample2_cat};
+use crate::resample::{max_pool2, upsample2, upsample2_cat};
 use candle_nn::{VarBuilder, VarMap};
 use serde::{Deserialize, Serialize};
 
@@ -369,14 +369,6 @@ impl Module for UNet {
     }
 }
 
-/// Nearest-neighbour ×2 upsampling from reshape + broadcast, whose gradients are plain sums.
-/// (`Tensor::upsample_nearest2d`'s backward is a grouped convolution with one group per channel,
-/// slow on the CPU, and it overwrites rather than accumulates its input's gradient.)
-fn upsample2(x: &Tensor) -> Result<Tensor> {
-    let (n, c, h, w) = x.dims4()?;
-    x.reshape((n, c, h, 1, w, 1))?.broadcast_as((n, c, h, 2, w, 2))?.reshape((n, c, 2 * h, 2 * w))
-}
-
 /// Pads an NCHW tensor with zeros at the bottom and right so that H and W are multiples of `multiple`.
 pub fn pad_to_multiple(x: &Tensor, multiple: usize) -> Result<Tensor> {
     if multiple == 0 {
@@ -448,7 +440,7 @@ pub fn fnv1a(bytes: &[u8]) -> u64 {
 }
 
 /// Steele, Lea and Flood's SplitMix64: tiny, seedable, good enough for initial weights.
-struct SplitMix64(u64);
+pub(crate) struct SplitMix64(pub(crate) u64);
 
 impl SplitMix64 {
     fn next_u64(&mut self) -> u64 {
@@ -460,7 +452,7 @@ impl SplitMix64 {
     }
 
     /// Uniform in [0, 1).
-    fn next_f64(&mut self) -> f64 {
+    pub(crate) fn next_f64(&mut self) -> f64 {
         (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
     }
 }

@@ -110,7 +110,8 @@ impl<'a> Renderer<'a> {
     }
 
     /// With `true`, every scene renders with the generic kernel (all features compiled in)
-    /// instead of one specialized to the scene: the same image, for speed comparisons.
+    /// instead of one specialized to the scene: the same image (up to the rare ties between equally distant
+    /// hits, which a flat scan and a BVH walk may break differently), for speed comparisons.
     pub fn with_generic_kernel(mut self, generic: bool) -> Self {
         self.generic = generic;
         self

@@ -384,9 +384,11 @@ pub struct KernelFeatures {
 
 /// Scenes with at most this many triangles are intersected by a flat scan: every invocation tests
 /// the same triangle at the same time, so on CPU drivers one load serves the whole SIMD batch,
-/// where a BVH walk indexes per invocation. Measured on lavapipe (`hush render`, 2 threads): the
-/// 36-triangle Cornell box 1.5× the paths per CPU-second of the BVH walk (0.21 → 0.32 M, the
-/// same image bit for bit); the 2,220-triangle test scenes of `data/tests/mitsuba` 6× fewer.
+/// where a BVH walk indexes per invocation. Measured on lavapipe with `hush render SCENE --spp 16
+/// --width 256 --height 256` (128 × 128 for the others), 2 threads, against the same binary with the
+/// threshold at 100,000: `data/scenes/cbox` (36 triangles) 1.5× the paths per CPU-second of the BVH walk
+/// (0.21 → 0.32 M, the same image bit for bit); `data/tests/mitsuba/{conductor,plastic,roughplastic}`
+/// (2,220 triangles in the conductor scene) 6× fewer with a scan.
 pub const FLAT_SCAN_MAX_TRIANGLES: usize = 64;
 
 impl KernelFeatures {
