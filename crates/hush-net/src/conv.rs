@@ -415,8 +415,27 @@ mod winograd {
         ],
     };
 
+    /// Runs `f` compiled for AVX-512 where the CPU has it, else as built (baseline x86-64 vectors: SSE2).
+    /// The transforms below are inlined into it (`#[inline(always)]`), so their fixed 16-wide blocks become
+    /// single AVX-512 instructions; the GEMMs choose their kernels at run time themselves.
+    #[inline(always)]
+    fn with_simd<R>(f: impl FnOnce() -> R) -> R {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            #[target_feature(enable = "avx512f")]
+            fn avx512<R>(f: impl FnOnce() -> R) -> R {
+                f()
+            }
+            // SAFETY: the CPU has AVX-512F, checked just above.
+            #[allow(unsafe_code)]
+            return unsafe { avx512(f) };
+        }
+        f()
+    }
+
     /// Splits an input row by phase: padded column `p = x + 1` goes to element `p div M` of phase `p mod M`
     /// (phases `phase` apart in `row`). A strided copy per phase, without per-element index arithmetic.
+    #[inline(always)]
     fn split_row<const M: usize>(src: &[f32], row: &mut [f32], phase: usize) {
         // Tiles t0..t1 of every phase, one strided copy each.
         let strided = |row: &mut [f32], t0: usize, t1: usize| {
@@ -457,6 +476,7 @@ mod winograd {
 
     /// The inverse of [`split_row`] for an output row: column `M·t + k` from element `t` of phase `k`
     /// (phases `phase` apart), ReLU'd if asked. For F(4×4, 3×3), 64 columns at a time from registers.
+    #[inline(always)]
     fn merge_row<const M: usize>(phases: &[f32], phase: usize, relu: bool, out: &mut [f32]) {
         let act = |v: f32| if relu { v.max(0.0) } else { v };
         let mut done = 0;
@@ -480,6 +500,7 @@ mod winograd {
     /// is computed from its inputs in registers, 16 elements at a time (fixed-size arrays the compiler keeps
     /// in vector registers), zero coefficients skipped. (A pass per coefficient, as sums of scaled runs, loads and stores each
     /// output once per term: several times slower.)
+    #[inline(always)]
     fn combine<const I: usize, const O: usize>(
         coef: &[[f32; I]; O],
         ins: [&[f32]; I],
@@ -542,6 +563,7 @@ mod winograd {
         /// `p div M`, so that column `M·tx + j` of tile `tx` is element `tx + j div M` of phase `j mod M`. Both
         /// transforms are then sums of whole contiguous runs (over columns for `Bᵀ d`, over tiles for
         /// `(Bᵀ d) B`) that the compiler vectorizes; a per-tile loop over strided columns does not.
+        #[inline(always)]
         fn transform_input(
             &self,
             geom: &Geometry,
@@ -598,6 +620,7 @@ mod winograd {
         /// `h_band × w`). Both transforms run over all tiles of a tile row at once, and the output row is
         /// gathered from its M phases last (the reverse of [`Self::transform_input`]'s split).
         #[allow(clippy::too_many_arguments)]
+        #[inline(always)]
         fn transform_output(
             &self,
             m: &[f32],
@@ -644,6 +667,7 @@ mod winograd {
         /// `A² × co × tiles`, ξ-major, tile `t` covering rows `M·ty .. M·ty + M` and the same columns
         /// (the output tile of [`Self::transform_input`]'s input tile), zero outside the image. Split by
         /// phase as there, so that both transforms are sums of contiguous runs.
+        #[inline(always)]
         fn transform_gradient(
             &self,
             (co, h, w): (usize, usize, usize),
@@ -719,15 +743,16 @@ mod winograd {
                     let mut dw = vec![0f32; A * A * co * c];
                     let (mut v, mut z) = (Vec::new(), Vec::new());
                     for &(i, ty0, rows) in group {
-                        self.transform_input(
-                            geom,
-                            &x[i * c * h * w..(i + 1) * c * h * w],
-                            (ty0, rows),
-                            tiles_x,
-                            &mut v,
+                        let image = &x[i * c * h * w..(i + 1) * c * h * w];
+                        with_simd(
+                            #[inline(always)]
+                            || self.transform_input(geom, image, (ty0, rows), tiles_x, &mut v),
                         );
                         let g = &grad[i * co * h * w..(i + 1) * co * h * w];
-                        self.transform_gradient((co, h, w), g, (ty0, rows), tiles_x, &mut z);
+                        with_simd(
+                            #[inline(always)]
+                            || self.transform_gradient((co, h, w), g, (ty0, rows), tiles_x, &mut z),
+                        );
                         let tiles = rows * tiles_x;
                         for xi in 0..A * A {
                             // SAFETY: dw[ξ] is co × c (row-major), z[ξ] co × tiles (row-major) and v[ξ]
@@ -801,7 +826,11 @@ mod winograd {
                 || (Vec::new(), Vec::new()),
                 |(v, m), (i, ty0, rows)| {
                     {
-                        self.transform_input(geom, &x[i * c * h * w..(i + 1) * c * h * w], (ty0, rows), tiles_x, v);
+                        let image = &x[i * c * h * w..(i + 1) * c * h * w];
+                        with_simd(
+                            #[inline(always)]
+                            || self.transform_input(geom, image, (ty0, rows), tiles_x, v),
+                        );
                         let tiles = rows * tiles_x;
                         // The GEMMs overwrite every element: no clearing needed.
                         m.resize(A * A * co * tiles, 0.0);
@@ -834,7 +863,11 @@ mod winograd {
                                 )
                             };
                             let shape = (rows, tiles_x);
-                            self.transform_output(&m[o * tiles..], co * tiles, shape, (y1 - y0, w), b, relu, dst);
+                            let m = &m[o * tiles..];
+                            with_simd(
+                                #[inline(always)]
+                                || self.transform_output(m, co * tiles, shape, (y1 - y0, w), b, relu, dst),
+                            );
                         }
                     }
                 },
