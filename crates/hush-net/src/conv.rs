@@ -433,17 +433,19 @@ mod winograd {
         f()
     }
 
-    /// Splits an input row by phase: padded column `p = x + 1` goes to element `p div M` of phase `p mod M`
-    /// (phases `phase` apart in `row`). A strided copy per phase, without per-element index arithmetic.
+    /// Splits a row by phase: column `p = x + pad` (`pad` is 1 for an input row, whose tiles start one
+    /// column before the image, and 0 for a gradient row) goes to element `p div M` of phase `p mod M`
+    /// (phases `phase` apart in `row`; elements no column reaches are left as they are). A strided copy
+    /// per phase, without per-element index arithmetic.
     #[inline(always)]
-    fn split_row<const M: usize>(src: &[f32], row: &mut [f32], phase: usize) {
+    fn split_row<const M: usize>(src: &[f32], row: &mut [f32], phase: usize, pad: usize) {
         // Tiles t0..t1 of every phase, one strided copy each.
         let strided = |row: &mut [f32], t0: usize, t1: usize| {
             for (r, dst) in row.chunks_mut(phase).enumerate().take(M) {
-                // p = M·t + r, so x = M·t + r − 1 (phase 0 has no tile 0 column: the padding).
-                let t0 = t0.max(usize::from(r == 0));
+                // p = M·t + r, so x = M·t + r − pad (phase r < pad has no tile 0 column: the padding).
+                let t0 = t0.max(usize::from(r < pad));
                 if t0 < t1 {
-                    let from = src.iter().skip(M * t0 + r - 1).step_by(M);
+                    let from = src.iter().skip(M * t0 + r - pad).step_by(M);
                     for (d, &e) in dst[t0..t1].iter_mut().zip(from) {
                         *d = e;
                     }
@@ -451,12 +453,12 @@ mod winograd {
             }
         };
         // For F(4×4, 3×3), blocks of 16 tiles after the first: 64 columns read at once and shuffled
-        // into the four phases (vectorized). Block b covers x = 64b − 1 .. 64b + 63.
+        // into the four phases (vectorized). Block b covers x = 64b − pad .. 64b + 64 − pad.
         let mut blocks_end = 0;
         if M == 4 {
-            let blocks = (1..phase / 16).take_while(|b| 64 * b + 63 <= src.len());
+            let blocks = (1..phase / 16).take_while(|b| 64 * b + 64 - pad <= src.len());
             for b in blocks {
-                let block: &[f32; 64] = src[64 * b - 1..64 * b + 63].try_into().expect("64 columns");
+                let block: &[f32; 64] = src[64 * b - pad..64 * b + 64 - pad].try_into().expect("64 columns");
                 for r in 0..4 {
                     let dst: &mut [f32; 16] = (&mut row[r * phase + 16 * b..][..16]).try_into().expect("16 tiles");
                     for (t, d) in dst.iter_mut().enumerate() {
@@ -588,7 +590,7 @@ mod winograd {
                 let channel = &image[ci * h * w..(ci + 1) * h * w];
                 for (r, row) in split.chunks_mut(len).enumerate() {
                     match (M * ty0 + r).checked_sub(1).filter(|&y| y < h) {
-                        Some(y) => split_row::<M>(&channel[y * w..(y + 1) * w], row, phase),
+                        Some(y) => split_row::<M>(&channel[y * w..(y + 1) * w], row, phase, 1),
                         None => row.fill(0.0),
                     }
                 }
@@ -690,9 +692,7 @@ mod winograd {
                     for (i, row) in z.chunks_mut(len).enumerate() {
                         let y = M * ty + i;
                         if y < h {
-                            for (x, &e) in channel[y * w..(y + 1) * w].iter().enumerate() {
-                                row[(x % M) * tiles_x + x / M] = e;
-                            }
+                            split_row::<M>(&channel[y * w..(y + 1) * w], row, tiles_x, 0);
                         } else {
                             row.fill(0.0);
                         }
