@@ -131,7 +131,11 @@ fn new_net(info: &ModelInfo, device: &Device) -> Result<(VarMap, Net)> {
 
 fn inference(a: &NetArgs, device: &Device) -> Result<serde_json::Value> {
     let info = a.info()?;
-    let (_varmap, net) = new_net(&info, device)?;
+    // Loaded from weight bytes as `hush denoise` loads a model: plain tensors, not training variables,
+    // whose ops would record the graph and keep every activation alive until the output is dropped.
+    let (varmap, _) = new_net(&info, device)?;
+    let (net, _) = hush_net::load_model(&hush_net::save_weights(&varmap, &info)?, device)?;
+    drop(varmap);
     let color = synthetic(a.size, 3, 1);
     let aux: Vec<Vec<f32>> = (0..info.features.aux.len()).map(|i| synthetic(a.size, 3, 2 + i as u32)).collect();
     let aux_refs: Vec<&[f32]> = aux.iter().map(Vec::as_slice).collect();
