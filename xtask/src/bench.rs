@@ -20,8 +20,8 @@ use std::process::Command;
 
 use crate::mitsuba;
 use crate::util::{
-    Result, build_hush, ensure_vulkan, load_average, output, project_root, read_json, release, spawn, target_dir,
-    write_json,
+    Result, build_hush, ensure_vulkan, load_average, number_arg, output, project_root, read_json, release, spawn,
+    target_dir, write_json,
 };
 
 pub fn run(args: &[String]) -> Result<()> {
@@ -37,13 +37,6 @@ pub fn run(args: &[String]) -> Result<()> {
                   cargo xtask bench train [--release] [--steps N]"
                 .into(),
         ),
-    }
-}
-
-fn spp_arg(args: &[String], default: u32) -> Result<u32> {
-    match args.iter().position(|a| a == "--spp") {
-        Some(i) => args.get(i + 1).and_then(|s| s.parse().ok()).ok_or_else(|| "--spp needs a number".to_string()),
-        None => Ok(default),
     }
 }
 
@@ -108,10 +101,7 @@ fn render(args: &[String]) -> Result<()> {
     } else {
         build_hush(release(args))?
     };
-    let spp_override = match args.iter().position(|a| a == "--spp") {
-        Some(_) => Some(spp_arg(args, 0)?),
-        None => None,
-    };
+    let spp_override = if args.iter().any(|a| a == "--spp") { Some(number_arg(args, "--spp", 0)?) } else { None };
     let skip_mitsuba = args.iter().any(|a| a == "--no-mitsuba");
     let dir = target_dir().join("bench");
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
@@ -256,13 +246,7 @@ fn render(args: &[String]) -> Result<()> {
 fn dataset(args: &[String]) -> Result<()> {
     ensure_vulkan()?;
     let hush = build_hush(release(args))?;
-    let num = |flag: &str, default: u32| -> Result<u32> {
-        match args.iter().position(|a| a == flag) {
-            Some(i) => args.get(i + 1).and_then(|s| s.parse().ok()).ok_or_else(|| format!("{flag} needs a number")),
-            None => Ok(default),
-        }
-    };
-    let (size, views) = (num("--size", 128)?, num("--views", 2)?);
+    let (size, views): (u32, u32) = (number_arg(args, "--size", 128)?, number_arg(args, "--views", 2)?);
     let dir = target_dir().join("bench");
     let out = dir.join("dataset-cbox");
     let _ = std::fs::remove_dir_all(&out);

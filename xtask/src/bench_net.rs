@@ -16,7 +16,7 @@ use std::process::Command;
 
 use crate::baselines;
 use crate::util::{Result, build_hush, ensure_vulkan, load_average, output, project_root, release, spawn, target_dir};
-use crate::util::{read_json, write_json};
+use crate::util::{number_arg, read_json, write_json};
 
 fn hush_json(hush: &Path, threads: Option<usize>, args: &[&str]) -> Result<serde_json::Value> {
     let mut cmd = Command::new(hush);
@@ -144,10 +144,7 @@ pub fn net(args: &[String]) -> Result<()> {
 pub fn train(args: &[String]) -> Result<()> {
     ensure_vulkan()?;
     let hush = build_hush(release(args))?;
-    let steps = match args.iter().position(|a| a == "--steps") {
-        Some(i) => args.get(i + 1).and_then(|s| s.parse::<u32>().ok()).ok_or("--steps needs a number")?,
-        None => 60,
-    };
+    let steps: u32 = number_arg(args, "--steps", 60)?;
     let dir = target_dir().join("bench");
     let dataset = dir.join("train-dataset");
     if !dataset.join("manifest.json").is_file() {

@@ -11,7 +11,8 @@ use std::process::Command;
 
 use crate::demo::{eval_command, noisy_and_model_psnr, train_command};
 use crate::util::{
-    Result, build_hush, ensure_vulkan, load_average, project_root, read_json, release, spawn, target_dir, write_json,
+    Result, build_hush, ensure_vulkan, load_average, number_arg, project_root, read_json, release, spawn, target_dir,
+    write_json,
 };
 
 /// The scenes, as paths below the repository root.
@@ -24,10 +25,7 @@ const SPP: u64 = 4;
 const STEPS: u32 = 2000;
 
 pub fn run(args: &[String]) -> Result<()> {
-    let steps = match args.iter().position(|a| a == "--steps") {
-        Some(i) => args.get(i + 1).and_then(|s| s.parse().ok()).ok_or("--steps needs a number")?,
-        None => STEPS,
-    };
+    let steps = number_arg(args, "--steps", STEPS)?;
     ensure_vulkan()?;
     let hush = build_hush(release(args))?;
     let dir = target_dir().join("train-check");

@@ -31,6 +31,14 @@ pub fn release(args: &[String]) -> bool {
     args.iter().any(|a| a == "--release")
 }
 
+/// The number after `flag` in `args`, or `default` where the flag is absent.
+pub fn number_arg<T: std::str::FromStr>(args: &[String], flag: &str, default: T) -> Result<T> {
+    match args.iter().position(|a| a == flag) {
+        Some(i) => args.get(i + 1).and_then(|s| s.parse().ok()).ok_or_else(|| format!("{flag} needs a number")),
+        None => Ok(default),
+    }
+}
+
 /// Builds the `hush` binary (the dev profile optimizes dependencies, so the tests' build is
 /// reused; `--release` builds with full optimization) and returns its path.
 pub fn build_hush(release: bool) -> Result<PathBuf> {
@@ -177,6 +185,14 @@ pub fn site_packages(venv: &Path) -> Result<PathBuf> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn number_arg_reads_the_value_after_its_flag() {
+        let args: Vec<String> = ["bench", "--steps", "12", "--spp"].iter().map(|s| s.to_string()).collect();
+        assert_eq!(number_arg(&args, "--steps", 60u32), Ok(12));
+        assert_eq!(number_arg(&args, "--size", 128u32), Ok(128));
+        assert_eq!(number_arg::<u32>(&args, "--spp", 4), Err("--spp needs a number".to_string()));
+    }
 
     fn scratch(name: &str) -> PathBuf {
         let dir = std::env::temp_dir().join(format!("xtask-util-{name}-{}", std::process::id()));
