@@ -20,10 +20,11 @@ mod gpu;
 mod probe;
 mod render;
 mod rough;
+mod scan;
 mod upload;
 
 pub use gpu::{GpuContext, INSTALL_HINT};
-pub use render::{KERNEL_SOURCE, RenderOutput, RenderSettings, Renderer};
+pub use render::{KERNEL_SOURCE, RenderOutput, RenderSettings, Renderer, kernel_source};
 pub use upload::KernelFeatures;
 
 /// Why a render could not run.

@@ -116,46 +116,38 @@ fn enter(n: Node, o: vec3<f32>, inv_d: vec3<f32>, t_max: f32) -> f32 {
     return select(T_MAX, near, near <= far);
 }
 
-// Möller–Trumbore; updates `hit` when triangle i is nearer.
-fn test_triangle(i: u32, o: vec3<f32>, d: vec3<f32>, hit: ptr<function, Hit>) {
-    let tri = tris[i];
-    let pv = cross(d, tri.e2.xyz);
-    let det = dot(tri.e1.xyz, pv);
-    if abs(det) < 1e-20 {
-        return;
-    }
+// Möller–Trumbore; updates `hit` when triangle i (corner p0, edges e1 and e2) is nearer. One
+// branch at the end: every condition is an acceptance test, so NaNs from a near-zero determinant
+// reject. (On CPU drivers both sides of a branch run under a mask: early exits cost, not save.)
+fn test_triangle_at(i: u32, p0: vec3<f32>, e1: vec3<f32>, e2: vec3<f32>, o: vec3<f32>, d: vec3<f32>, hit: ptr<function, Hit>) {
+    let pv = cross(d, e2);
+    let det = dot(e1, pv);
     let inv = 1.0 / det;
-    let tv = o - tri.p0.xyz;
+    let tv = o - p0;
     let u = dot(tv, pv) * inv;
-    if u < 0.0 || u > 1.0 {
-        return;
-    }
-    let qv = cross(tv, tri.e1.xyz);
+    let qv = cross(tv, e1);
     let v = dot(d, qv) * inv;
-    if v < 0.0 || u + v > 1.0 {
-        return;
-    }
-    let t = dot(tri.e2.xyz, qv) * inv;
-    if t > 0.0 && t < (*hit).t {
+    let t = dot(e2, qv) * inv;
+    let nearer = abs(det) >= 1e-20 && u >= 0.0 && u <= 1.0 && v >= 0.0 && u + v <= 1.0 && t > 0.0 && t < (*hit).t;
+    if nearer {
         *hit = Hit(t, i, u, v);
     }
 }
 
-// The nearest hit with t in (0, t_max) through the BVH; with `any`, the first hit found.
+fn test_triangle(i: u32, o: vec3<f32>, d: vec3<f32>, hit: ptr<function, Hit>) {
+    let tri = tris[i];
+    test_triangle_at(i, tri.p0.xyz, tri.e1.xyz, tri.e2.xyz, o, d, hit);
+}
+
+// The nearest hit with t in (0, t_max); with `any`, the BVH walk returns the first hit it finds
+// (the flat scan finds the nearest either way).
 fn trace_ray(o: vec3<f32>, d: vec3<f32>, t_max: f32, any: bool) -> Hit {
     var hit = Hit(t_max, NO_HIT, 0.0, 0.0);
     if params.tri_count == 0u {
         return hit;
     }
     if FLAT_SCAN {
-        // The same triangle index in every invocation: one load for the whole SIMD batch on CPU
-        // drivers (a BVH walk indexes per invocation) and broadcast reads on GPUs.
-        for (var k = 0u; k < params.tri_count; k++) {
-            test_triangle(k, o, d, &hit);
-            if any && hit.tri != NO_HIT {
-                return hit;
-            }
-        }
+        scan_triangles(o, d, &hit);
         return hit;
     }
     // Tiny direction components are replaced by ±1e-30 so that their reciprocals stay finite.

@@ -10,8 +10,27 @@ use wgpu::util::DeviceExt;
 use crate::upload::{GpuLight, GpuMaterial, GpuNode, GpuNormals, GpuTri, KernelFeatures, flatten};
 use crate::{GpuContext, TraceError};
 
-/// The WGSL source of the path-tracing kernel (validated by a test with naga).
-pub const KERNEL_SOURCE: &str = concat!(include_str!("bsdf.wgsl"), include_str!("env.wgsl"), include_str!("path.wgsl"));
+/// The WGSL source of the generic path-tracing kernel (validated by a test with naga).
+pub const KERNEL_SOURCE: &str =
+    concat!(include_str!("bsdf.wgsl"), include_str!("env.wgsl"), include_str!("path.wgsl"), include_str!("scan.wgsl"));
+
+/// The kernel without its flat scan (`scan.wgsl`), which a kernel specialized to a scene replaces.
+const KERNEL_BODY: &str = concat!(include_str!("bsdf.wgsl"), include_str!("env.wgsl"), include_str!("path.wgsl"));
+
+/// The WGSL source the renderer compiles for `scene`: the generic source, or with `generic` false
+/// and a scene small enough for a flat scan, that source with the scene's triangles written in.
+/// (Which features are compiled out is set by pipeline constants, not in the source.)
+pub fn kernel_source(scene: &Scene, generic: bool) -> Result<String, TraceError> {
+    Ok(match specialized_scan(&flatten(scene)?, generic) {
+        Some(scan) => format!("{KERNEL_BODY}{scan}"),
+        None => KERNEL_SOURCE.to_string(),
+    })
+}
+
+/// The scene's own `scan_triangles`, when its kernel has one.
+fn specialized_scan(flat: &crate::upload::GpuScene, generic: bool) -> Option<String> {
+    (!generic && flat.features.flat_scan).then(|| crate::scan::scan_source(&flat.tris))
+}
 
 /// Floats per pixel in the accumulation buffer; mirrors `ACCUM_STRIDE` in the kernel.
 const ACCUM_STRIDE: usize = 19;
@@ -84,13 +103,14 @@ struct Params {
 }
 
 /// Compiled kernels on one device: the generic kernel and one specialized per set of
-/// [`KernelFeatures`] rendered so far.
+/// [`KernelFeatures`] rendered so far (per scene, for scenes whose triangles it holds).
 #[derive(Debug)]
 pub struct Renderer<'a> {
     gpu: &'a GpuContext,
     module: wgpu::ShaderModule,
     generic: bool,
-    pipelines: Mutex<HashMap<KernelFeatures, wgpu::ComputePipeline>>,
+    /// Keyed by the features and, for a kernel with the scene's triangles written in, its scan.
+    pipelines: Mutex<HashMap<(KernelFeatures, Option<String>), wgpu::ComputePipeline>>,
 }
 
 impl<'a> Renderer<'a> {
@@ -105,7 +125,7 @@ impl<'a> Renderer<'a> {
             return Err(TraceError::Gpu(format!("the path-tracing kernel does not compile on {}: {e}", gpu.info.name)));
         }
         let renderer = Renderer { gpu, module, generic: false, pipelines: Mutex::new(HashMap::new()) };
-        renderer.pipeline(KernelFeatures::ALL)?;
+        renderer.pipeline(KernelFeatures::ALL, None)?;
         Ok(renderer)
     }
 
@@ -117,10 +137,12 @@ impl<'a> Renderer<'a> {
         self
     }
 
-    /// The kernel specialized to `features` (pipeline-overridable constants), compiled once.
-    fn pipeline(&self, features: KernelFeatures) -> Result<wgpu::ComputePipeline, TraceError> {
+    /// The kernel specialized to `features` (pipeline-overridable constants) and, with `scan`, to a
+    /// scene's triangles, compiled once.
+    fn pipeline(&self, features: KernelFeatures, scan: Option<String>) -> Result<wgpu::ComputePipeline, TraceError> {
         let mut pipelines = self.pipelines.lock().map_err(|_| TraceError::Gpu("a render panicked".into()))?;
-        if let Some(p) = pipelines.get(&features) {
+        let key = (features, scan);
+        if let Some(p) = pipelines.get(&key) {
             return Ok(p.clone());
         }
         let flag = |b: bool| if b { 1.0 } else { 0.0 };
@@ -134,10 +156,16 @@ impl<'a> Renderer<'a> {
         ];
         let device = &self.gpu.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let specialized = key.1.as_ref().map(|scan| {
+            device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("path.wgsl with the scene's triangles"),
+                source: wgpu::ShaderSource::Wgsl(format!("{KERNEL_BODY}{scan}").into()),
+            })
+        });
         let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some("path"),
             layout: None,
-            module: &self.module,
+            module: specialized.as_ref().unwrap_or(&self.module),
             entry_point: Some("main"),
             compilation_options: wgpu::PipelineCompilationOptions { constants: &constants, ..Default::default() },
             cache: None,
@@ -148,7 +176,7 @@ impl<'a> Renderer<'a> {
                 self.gpu.info.name
             )));
         }
-        pipelines.insert(features, pipeline.clone());
+        pipelines.insert(key, pipeline.clone());
         Ok(pipeline)
     }
 
@@ -252,7 +280,7 @@ impl<'a> Renderer<'a> {
         });
         let features = if self.generic { KernelFeatures::ALL } else { flat.features };
         let compile = Instant::now();
-        let pipeline = self.pipeline(features)?;
+        let pipeline = self.pipeline(features, specialized_scan(&flat, self.generic))?;
         start += compile.elapsed();
         let layout = pipeline.get_bind_group_layout(0);
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {

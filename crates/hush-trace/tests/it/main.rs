@@ -43,6 +43,22 @@ fn kernel_validates_with_naga() {
         .expect("WGSL validates");
 }
 
+/// The kernel with the box's 36 triangles written in validates too, and holds all of them.
+#[test]
+fn specialized_kernel_validates_with_naga() {
+    let source = hush_trace::kernel_source(&cbox(16), false).unwrap();
+    assert_eq!(
+        source.matches("test_triangle_at(").count() - 2,
+        36,
+        "the declaration, the buffer call, 36 literal calls"
+    );
+    let module = naga::front::wgsl::parse_str(&source).expect("WGSL parses");
+    naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())
+        .validate(&module)
+        .expect("WGSL validates");
+    assert_eq!(hush_trace::kernel_source(&cbox(16), true).unwrap(), hush_trace::KERNEL_SOURCE);
+}
+
 /// The box at 256 spp against Mitsuba 3's 3156-spp render.
 ///
 /// hush renders at 128² instead of 512²: with a box filter, a 128² pixel's expected value is
