@@ -65,9 +65,10 @@ const RR_DEPTH: u32 = 5u;
 const ACCUM_STRIDE: u32 = 19u;
 const T_MAX: f32 = 3.0e38;
 
-// Specialization (see bsdf.wgsl): textures and the environment.
+// Specialization (see bsdf.wgsl): textures, the environment, vertex normals.
 override HAS_TEXTURES: bool = true;
 override HAS_ENV: bool = true;
+override HAS_SHADING_NORMALS: bool = true;
 // Few triangles: every ray tests all of them in order instead of walking the BVH.
 override FLAT_SCAN: bool = false;
 
@@ -88,11 +89,16 @@ fn rand() -> f32 {
 
 // ---- geometry ----
 
+// A ray's nearest hit: distance, triangle, barycentrics, and of that triangle its material,
+// geometric normal (cross(e1, e2), not normalized) and light-sampling density per unit area.
 struct Hit {
     t: f32,
     tri: u32,
     u: f32,
     v: f32,
+    mat: u32,
+    ng: vec3<f32>,
+    area_pdf: f32,
 }
 
 // A BVH node (hush_scene::BvhNode): a leaf when count > 0 (triangles first .. first + count),
@@ -119,7 +125,8 @@ fn enter(n: Node, o: vec3<f32>, inv_d: vec3<f32>, t_max: f32) -> f32 {
 // Möller–Trumbore; updates `hit` when triangle i (corner p0, edges e1 and e2) is nearer. One
 // branch at the end: every condition is an acceptance test, so NaNs from a near-zero determinant
 // reject. (On CPU drivers both sides of a branch run under a mask: early exits cost, not save.)
-fn test_triangle_at(i: u32, p0: vec3<f32>, e1: vec3<f32>, e2: vec3<f32>, o: vec3<f32>, d: vec3<f32>, hit: ptr<function, Hit>) {
+// Returns whether it was; the caller sets the triangle's other fields of `hit`.
+fn test_triangle_at(i: u32, p0: vec3<f32>, e1: vec3<f32>, e2: vec3<f32>, o: vec3<f32>, d: vec3<f32>, hit: ptr<function, Hit>) -> bool {
     let pv = cross(d, e2);
     let det = dot(e1, pv);
     let inv = 1.0 / det;
@@ -130,19 +137,28 @@ fn test_triangle_at(i: u32, p0: vec3<f32>, e1: vec3<f32>, e2: vec3<f32>, o: vec3
     let t = dot(e2, qv) * inv;
     let nearer = abs(det) >= 1e-20 && u >= 0.0 && u <= 1.0 && v >= 0.0 && u + v <= 1.0 && t > 0.0 && t < (*hit).t;
     if nearer {
-        *hit = Hit(t, i, u, v);
+        (*hit).t = t;
+        (*hit).tri = i;
+        (*hit).u = u;
+        (*hit).v = v;
     }
+    return nearer;
 }
 
+// Triangle i of the buffer.
 fn test_triangle(i: u32, o: vec3<f32>, d: vec3<f32>, hit: ptr<function, Hit>) {
     let tri = tris[i];
-    test_triangle_at(i, tri.p0.xyz, tri.e1.xyz, tri.e2.xyz, o, d, hit);
+    if test_triangle_at(i, tri.p0.xyz, tri.e1.xyz, tri.e2.xyz, o, d, hit) {
+        (*hit).mat = bitcast<u32>(tri.p0.w);
+        (*hit).ng = cross(tri.e1.xyz, tri.e2.xyz);
+        (*hit).area_pdf = tri.e1.w;
+    }
 }
 
 // The nearest hit with t in (0, t_max); with `any`, the BVH walk returns the first hit it finds
 // (the flat scan finds the nearest either way).
 fn trace_ray(o: vec3<f32>, d: vec3<f32>, t_max: f32, any: bool) -> Hit {
-    var hit = Hit(t_max, NO_HIT, 0.0, 0.0);
+    var hit = Hit(t_max, NO_HIT, 0.0, 0.0, 0u, vec3<f32>(0.0), 0.0);
     if params.tri_count == 0u {
         return hit;
     }
@@ -234,19 +250,13 @@ fn power_heuristic(a: f32, b: f32) -> f32 {
     return a2 / (a2 + b * b);
 }
 
-// Index of the light whose CDF interval holds u (binary search).
-fn pick_light(u: f32) -> u32 {
-    var lo = 0u;
-    var hi = params.light_count - 1u;
-    while lo < hi {
-        let mid = (lo + hi) / 2u;
-        if lights[mid].cdf <= u {
-            lo = mid + 1u;
-        } else {
-            hi = mid;
-        }
-    }
-    return lo;
+// A triangle light: corner, edges, density per unit area of picking a point on it, emitted radiance.
+struct LightTri {
+    p0: vec3<f32>,
+    e1: vec3<f32>,
+    e2: vec3<f32>,
+    area_pdf: f32,
+    emission: vec3<f32>,
 }
 
 struct Sample {
@@ -327,26 +337,26 @@ fn bounce(st: ptr<function, PathState>) -> bool {
         }
         return false;
     }
-    let tri = tris[hit.tri];
     let p = o + d * hit.t;
-    let ng = normalize(cross(tri.e1.xyz, tri.e2.xyz));
+    let ng = normalize(hit.ng);
     let front = dot(ng, d) < 0.0;
-    let nr = normals[hit.tri];
     var ns = ng;
-    if nr.n0.w > 0.5 {
+    var mat = material(hit.mat);
+    if HAS_SHADING_NORMALS || HAS_TEXTURES {
+        let nr = normals[hit.tri];
         let w = 1.0 - hit.u - hit.v;
-        ns = normalize(w * nr.n0.xyz + hit.u * nr.n1.xyz + hit.v * nr.n2.xyz);
-        // Keep the shading normal on the geometric front side.
-        if dot(ns, ng) < 0.0 {
-            ns = -ns;
+        if nr.n0.w > 0.5 {
+            ns = normalize(w * nr.n0.xyz + hit.u * nr.n1.xyz + hit.v * nr.n2.xyz);
+            // Keep the shading normal on the geometric front side.
+            if dot(ns, ng) < 0.0 {
+                ns = -ns;
+            }
         }
-    }
-    var mat = materials[bitcast<u32>(tri.p0.w)];
-    let tex = bitcast<u32>(mat.e.x);
-    if HAS_TEXTURES && tex != NO_TEXTURE {
-        let w = 1.0 - hit.u - hit.v;
-        let uv = w * nr.uv01.xy + hit.u * nr.uv01.zw + hit.v * nr.uv2.xy;
-        mat.a = vec4<f32>(texture_lookup(tex, uv), mat.a.w);
+        let tex = bitcast<u32>(mat.e.x);
+        if HAS_TEXTURES && tex != NO_TEXTURE {
+            let uv = w * nr.uv01.xy + hit.u * nr.uv01.zw + hit.v * nr.uv2.xy;
+            mat.a = vec4<f32>(texture_lookup(tex, uv), mat.a.w);
+        }
     }
     let delta = mat_is_delta(mat);
 
@@ -363,7 +373,7 @@ fn bounce(st: ptr<function, PathState>) -> bool {
     if mat.emission.w > 0.5 && front {
         var weight = 1.0;
         if !prev_delta {
-            let light_pdf = (1.0 - env.radiance.w) * tri.e1.w * hit.t * hit.t / dot(ng, -d);
+            let light_pdf = (1.0 - env.radiance.w) * hit.area_pdf * hit.t * hit.t / dot(ng, -d);
             weight = power_heuristic(prev_pdf, light_pdf);
         }
         (*st).out.radiance += throughput * mat.emission.xyz * weight;
@@ -393,24 +403,23 @@ fn bounce(st: ptr<function, PathState>) -> bool {
             light_pdf = env_pick * es.pdf;
             radiance = es.radiance;
         } else {
-            let light = lights[pick_light(rand())];
-            let lt = tris[light.tri];
+            let lt = light_triangle(rand());
             var a = rand();
             var b = rand();
             if a + b > 1.0 {
                 a = 1.0 - a;
                 b = 1.0 - b;
             }
-            lp = lt.p0.xyz + a * lt.e1.xyz + b * lt.e2.xyz;
+            lp = lt.p0 + a * lt.e1 + b * lt.e2;
             to_env = false;
-            let lng = normalize(cross(lt.e1.xyz, lt.e2.xyz));
+            let lng = normalize(cross(lt.e1, lt.e2));
             let to_light = lp - p;
             let dist2 = dot(to_light, to_light);
             wi = to_light / sqrt(dist2);
             let cos_light = dot(lng, -wi);
             if cos_light > 0.0 {
-                light_pdf = (1.0 - env_pick) * lt.e1.w * dist2 / cos_light;
-                radiance = materials[bitcast<u32>(lt.p0.w)].emission.xyz;
+                light_pdf = (1.0 - env_pick) * lt.area_pdf * dist2 / cos_light;
+                radiance = lt.emission;
             }
         }
         let wi_local = to_local * wi;

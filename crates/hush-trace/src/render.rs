@@ -11,25 +11,32 @@ use crate::upload::{GpuLight, GpuMaterial, GpuNode, GpuNormals, GpuTri, KernelFe
 use crate::{GpuContext, TraceError};
 
 /// The WGSL source of the generic path-tracing kernel (validated by a test with naga).
-pub const KERNEL_SOURCE: &str =
-    concat!(include_str!("bsdf.wgsl"), include_str!("env.wgsl"), include_str!("path.wgsl"), include_str!("scan.wgsl"));
+pub const KERNEL_SOURCE: &str = concat!(
+    include_str!("bsdf.wgsl"),
+    include_str!("env.wgsl"),
+    include_str!("path.wgsl"),
+    include_str!("scene_scan.wgsl"),
+    include_str!("scene_material.wgsl"),
+    include_str!("scene_light.wgsl"),
+);
 
-/// The kernel without its flat scan (`scan.wgsl`), which a kernel specialized to a scene replaces.
+/// The kernel without its access to the scene (`scene_*.wgsl`), which a kernel specialized to a
+/// scene replaces (`scan.rs`).
 const KERNEL_BODY: &str = concat!(include_str!("bsdf.wgsl"), include_str!("env.wgsl"), include_str!("path.wgsl"));
 
-/// The WGSL source the renderer compiles for `scene`: the generic source, or with `generic` false
-/// and a scene small enough for a flat scan, that source with the scene's triangles written in.
-/// (Which features are compiled out is set by pipeline constants, not in the source.)
+/// The WGSL source the renderer compiles for `scene`: the generic source, or with `generic` false,
+/// the source with what of the scene is small enough written in as literals (see `scan.rs`).
+/// Which features are compiled out is set by pipeline constants, not in the source.
 pub fn kernel_source(scene: &Scene, generic: bool) -> Result<String, TraceError> {
-    Ok(match specialized_scan(&flatten(scene)?, generic) {
-        Some(scan) => format!("{KERNEL_BODY}{scan}"),
+    Ok(match specialized_scene(&flatten(scene)?, generic) {
+        Some(access) => format!("{KERNEL_BODY}{access}"),
         None => KERNEL_SOURCE.to_string(),
     })
 }
 
-/// The scene's own `scan_triangles`, when its kernel has one.
-fn specialized_scan(flat: &crate::upload::GpuScene, generic: bool) -> Option<String> {
-    (!generic && flat.features.flat_scan).then(|| crate::scan::scan_source(&flat.tris))
+/// The scene's own access functions, when its kernel has any.
+fn specialized_scene(flat: &crate::upload::GpuScene, generic: bool) -> Option<String> {
+    if generic { None } else { crate::scan::scene_source(flat) }
 }
 
 /// Floats per pixel in the accumulation buffer; mirrors `ACCUM_STRIDE` in the kernel.
@@ -108,8 +115,11 @@ struct Params {
 pub struct Renderer<'a> {
     gpu: &'a GpuContext,
     module: wgpu::ShaderModule,
+    /// Every binding of the kernel, explicitly: a specialized kernel may leave buffers unused.
+    bind_layout: wgpu::BindGroupLayout,
+    layout: wgpu::PipelineLayout,
     generic: bool,
-    /// Keyed by the features and, for a kernel with the scene's triangles written in, its scan.
+    /// Keyed by the features and, for a kernel with scene data written in, its scene access.
     pipelines: Mutex<HashMap<(KernelFeatures, Option<String>), wgpu::ComputePipeline>>,
 }
 
@@ -124,7 +134,34 @@ impl<'a> Renderer<'a> {
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(TraceError::Gpu(format!("the path-tracing kernel does not compile on {}: {e}", gpu.info.name)));
         }
-        let renderer = Renderer { gpu, module, generic: false, pipelines: Mutex::new(HashMap::new()) };
+        let buffer = |binding: u32, ty: wgpu::BufferBindingType| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer { ty, has_dynamic_offset: false, min_binding_size: None },
+            count: None,
+        };
+        let (uniform, read) = (wgpu::BufferBindingType::Uniform, wgpu::BufferBindingType::Storage { read_only: true });
+        let bind_layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("path"),
+            entries: &[
+                buffer(0, uniform),
+                buffer(1, read),
+                buffer(2, read),
+                buffer(3, read),
+                buffer(4, read),
+                buffer(5, wgpu::BufferBindingType::Storage { read_only: false }),
+                buffer(6, read),
+                buffer(7, read),
+                buffer(8, uniform),
+            ],
+        });
+        let layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("path"),
+            bind_group_layouts: &[Some(&bind_layout)],
+            immediate_size: 0,
+        });
+        let renderer =
+            Renderer { gpu, module, bind_layout, layout, generic: false, pipelines: Mutex::new(HashMap::new()) };
         renderer.pipeline(KernelFeatures::ALL, None)?;
         Ok(renderer)
     }
@@ -137,11 +174,11 @@ impl<'a> Renderer<'a> {
         self
     }
 
-    /// The kernel specialized to `features` (pipeline-overridable constants) and, with `scan`, to a
-    /// scene's triangles, compiled once.
-    fn pipeline(&self, features: KernelFeatures, scan: Option<String>) -> Result<wgpu::ComputePipeline, TraceError> {
+    /// The kernel specialized to `features` (pipeline-overridable constants) and, with `access`, to
+    /// a scene's data, compiled once.
+    fn pipeline(&self, features: KernelFeatures, access: Option<String>) -> Result<wgpu::ComputePipeline, TraceError> {
         let mut pipelines = self.pipelines.lock().map_err(|_| TraceError::Gpu("a render panicked".into()))?;
-        let key = (features, scan);
+        let key = (features, access);
         if let Some(p) = pipelines.get(&key) {
             return Ok(p.clone());
         }
@@ -153,18 +190,19 @@ impl<'a> Renderer<'a> {
             ("HAS_ROUGH_PLASTIC", flag(features.rough_plastic)),
             ("HAS_BECKMANN", flag(features.beckmann)),
             ("FLAT_SCAN", flag(features.flat_scan)),
+            ("HAS_SHADING_NORMALS", flag(features.shading_normals)),
         ];
         let device = &self.gpu.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let specialized = key.1.as_ref().map(|scan| {
+        let specialized = key.1.as_ref().map(|access| {
             device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some("path.wgsl with the scene's triangles"),
-                source: wgpu::ShaderSource::Wgsl(format!("{KERNEL_BODY}{scan}").into()),
+                label: Some("path.wgsl with the scene's data"),
+                source: wgpu::ShaderSource::Wgsl(format!("{KERNEL_BODY}{access}").into()),
             })
         });
         let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some("path"),
-            layout: None,
+            layout: Some(&self.layout),
             module: specialized.as_ref().unwrap_or(&self.module),
             entry_point: Some("main"),
             compilation_options: wgpu::PipelineCompilationOptions { constants: &constants, ..Default::default() },
@@ -280,12 +318,11 @@ impl<'a> Renderer<'a> {
         });
         let features = if self.generic { KernelFeatures::ALL } else { flat.features };
         let compile = Instant::now();
-        let pipeline = self.pipeline(features, specialized_scan(&flat, self.generic))?;
+        let pipeline = self.pipeline(features, specialized_scene(&flat, self.generic))?;
         start += compile.elapsed();
-        let layout = pipeline.get_bind_group_layout(0);
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("path"),
-            layout: &layout,
+            layout: &self.bind_layout,
             entries: &[
                 wgpu::BindGroupEntry { binding: 0, resource: params_buf.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 1, resource: tris.as_entire_binding() },

@@ -380,6 +380,8 @@ pub struct KernelFeatures {
     pub beckmann: bool,
     /// Few enough triangles ([`FLAT_SCAN_MAX_TRIANGLES`]) that rays test them all instead of walking the BVH.
     pub flat_scan: bool,
+    /// Some mesh has vertex normals (interpolated shading normals).
+    pub shading_normals: bool,
 }
 
 /// Scenes with at most this many triangles are intersected by a flat scan: every ray tests every
@@ -402,9 +404,10 @@ impl KernelFeatures {
         rough_plastic: true,
         beckmann: true,
         flat_scan: false,
+        shading_normals: true,
     };
     /// None of the optional features (diffuse, smooth and GGX-rough conductors, smooth and
-    /// thin glass, smooth plastic, triangle lights remain).
+    /// thin glass, smooth plastic, triangle lights, flat face normals remain).
     pub const NONE: KernelFeatures = KernelFeatures {
         textures: false,
         environment: false,
@@ -412,6 +415,7 @@ impl KernelFeatures {
         rough_plastic: false,
         beckmann: false,
         flat_scan: false,
+        shading_normals: false,
     };
 
     /// The features `scene` uses.
@@ -421,6 +425,7 @@ impl KernelFeatures {
             flat_scan: scene.triangle_count() <= FLAT_SCAN_MAX_TRIANGLES,
             ..KernelFeatures::NONE
         };
+        f.shading_normals = scene.meshes.iter().any(|m| m.normals.is_some());
         for m in scene.meshes.iter().map(|m| &m.material) {
             f.textures |= m.texture().is_some();
             let (alpha, distribution) = match *m {

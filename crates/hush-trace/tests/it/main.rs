@@ -387,24 +387,34 @@ fn time_limit_renders_whole_passes_up_to_the_spp_cap() {
     assert_eq!(reported, [16, 32, 40]);
 }
 
-/// The kernel specialized to a scene (what it lacks compiled out) traces the same paths as the
-/// generic kernel: same random numbers, same decisions. Compilers may contract floating-point
-/// operations differently, and a last-bit difference can flip a Russian-roulette decision, so
-/// the check allows 2 % of the pixels to differ by more than 1e-4 (relative) and the image
-/// means to differ by 0.5 %; a kernel that dropped a used feature (here the rough plastic
-/// sphere and the textured floor) changes far more. The textured scene also checks the flat
-/// triangle scan against the BVH walk.
+/// The kernel specialized to a scene (what it lacks compiled out, its small data written in as
+/// literals) traces the same paths as the generic kernel: same random numbers, same decisions.
+/// Compilers may contract floating-point operations differently, and a last-bit difference can
+/// flip a Russian-roulette decision, so the check allows 2 % of the pixels to differ by more than
+/// 1e-4 (relative) and the image means to differ by 0.5 %; a kernel that dropped a used feature
+/// (here the rough plastic sphere and the textured floor) changes far more. The textured scene and
+/// the box also check the flat triangle scan against the BVH walk; every scene here has its
+/// materials as literals, the box and the textured scene their light triangles, and the box has
+/// no vertex normals.
 #[test]
 fn specialized_kernel_renders_what_the_generic_one_does() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/tests/mitsuba");
-    for (name, expect) in [
-        ("roughplastic", KernelFeatures { rough_plastic: true, ..KernelFeatures::NONE }),
+    let smooth = KernelFeatures { shading_normals: true, ..KernelFeatures::NONE };
+    for (path, expect) in [
+        (dir.join("roughplastic"), KernelFeatures { rough_plastic: true, ..smooth }),
         // Few triangles: intersected by a flat scan instead of the BVH walk of the generic kernel.
-        ("textured", KernelFeatures { textures: true, flat_scan: true, ..KernelFeatures::NONE }),
-        ("envmap", KernelFeatures { environment: true, ..KernelFeatures::NONE }),
+        (dir.join("textured"), KernelFeatures { textures: true, flat_scan: true, ..smooth }),
+        (dir.join("envmap"), KernelFeatures { environment: true, ..smooth }),
+        (cbox_dir(), KernelFeatures { flat_scan: true, ..KernelFeatures::NONE }),
     ] {
-        let mut scene = Scene::load(&dir.join(name).join("scene.xml")).unwrap();
+        let name = path.file_name().unwrap().to_string_lossy().to_string();
+        let mut scene = Scene::load(&path.join("scene.xml")).unwrap();
         assert_eq!(KernelFeatures::of(&scene), expect, "{name}");
+        let source = hush_trace::kernel_source(&scene, false).unwrap();
+        assert!(source.contains("fn material(i: u32) -> Material {\n    var m = "), "{name}: materials as literals");
+        if expect.flat_scan {
+            assert!(source.contains("-> LightTri {\n    var l = "), "{name}: lights as literals");
+        }
         scene.film.width = 24;
         scene.film.height = 24;
         let settings = RenderSettings { spp: 4, seed: 3 };
