@@ -387,13 +387,13 @@ pub struct KernelFeatures {
 /// Scenes with at most this many triangles are intersected by a flat scan: every ray tests every
 /// triangle, which the specialized kernel holds as literals (`scan.rs`), so no invocation loads
 /// one, where a BVH walk loads nodes and triangles per invocation (per SIMD lane on CPU drivers).
-/// Measured on lavapipe with `hush render SCENE --spp 16 --width 256 --height 256` (128 × 128 for
-/// the others), 2 threads, against the same binary with the threshold at 100,000, when the scan
-/// still read the triangle buffer: `data/scenes/cbox` (36 triangles) 1.5× the paths per CPU-second
-/// of the BVH walk (0.21 → 0.32 M, the same image bit for bit);
-/// `data/tests/mitsuba/{conductor,plastic,roughplastic}` (2,220 triangles in the conductor scene)
-/// 6× fewer with a scan. With the triangles as literals the box reaches 1.27 M (512², 64 spp).
-pub const FLAT_SCAN_MAX_TRIANGLES: usize = 64;
+/// Measured on lavapipe, 2 threads, `hush render SCENE --spp 16 --width 256 --height 256`, the
+/// second run of each (the first compiles the kernel), against the same binary with the threshold
+/// at 100,000: the Cornell box with a UV sphere of 98, 288 or 968 triangles added (134, 324 and
+/// 1,004 in all) ran 0.40, 0.17 and 0.04 M paths per CPU-second with the scan against 0.20, 0.19
+/// and 0.15 with the BVH walk: the scan's cost grows with the triangle count and crosses the
+/// walk's near 275 triangles. The box alone (36) runs 2.9 M (512², 64 spp).
+pub const FLAT_SCAN_MAX_TRIANGLES: usize = 192;
 
 impl KernelFeatures {
     /// The generic kernel.
