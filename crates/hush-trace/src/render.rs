@@ -1,4 +1,4 @@
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
@@ -86,7 +86,7 @@ pub struct RenderOutput {
     /// Non-finite path samples the kernel discarded (0 in a correct render).
     pub discarded_samples: u64,
     /// Wall-clock seconds spent tracing (upload and read-back included; compiling the kernel
-    /// specialized to the scene, once per set of features, is not).
+    /// specialized to the scene, once per set of features and scene data written in, is not).
     pub seconds: f64,
 }
 
@@ -109,8 +109,9 @@ struct Params {
     pad: [u32; 3],
 }
 
-/// Compiled kernels on one device: the generic kernel and one specialized per set of
-/// [`KernelFeatures`] rendered so far (per scene, for scenes whose triangles it holds).
+/// Compiled kernels on one device: the generic kernel and the specialized ones rendered so far,
+/// one per set of [`KernelFeatures`] and, for scenes small enough to have their data written in,
+/// per scene ([`MAX_CACHED_KERNELS`] of those at most: the oldest is dropped).
 #[derive(Debug)]
 pub struct Renderer<'a> {
     gpu: &'a GpuContext,
@@ -119,8 +120,20 @@ pub struct Renderer<'a> {
     bind_layout: wgpu::BindGroupLayout,
     layout: wgpu::PipelineLayout,
     generic: bool,
-    /// Keyed by the features and, for a kernel with scene data written in, its scene access.
-    pipelines: Mutex<HashMap<(KernelFeatures, Option<String>), wgpu::ComputePipeline>>,
+    pipelines: Mutex<Pipelines>,
+}
+
+/// Kernels with scene data written in that a [`Renderer`] keeps compiled: a dataset renders a
+/// scene many times in a row, and each scene's kernel holds at most about 100 KB of source.
+pub const MAX_CACHED_KERNELS: usize = 8;
+
+/// Compiled pipelines keyed by the features and, for a kernel with scene data written in, its
+/// scene access; those in the order they were compiled.
+type PipelineKey = (KernelFeatures, Option<String>);
+#[derive(Debug, Default)]
+struct Pipelines {
+    map: HashMap<PipelineKey, wgpu::ComputePipeline>,
+    scene_order: VecDeque<PipelineKey>,
 }
 
 impl<'a> Renderer<'a> {
@@ -160,15 +173,15 @@ impl<'a> Renderer<'a> {
             bind_group_layouts: &[Some(&bind_layout)],
             immediate_size: 0,
         });
-        let renderer =
-            Renderer { gpu, module, bind_layout, layout, generic: false, pipelines: Mutex::new(HashMap::new()) };
+        let renderer = Renderer { gpu, module, bind_layout, layout, generic: false, pipelines: Mutex::default() };
         renderer.pipeline(KernelFeatures::ALL, None)?;
         Ok(renderer)
     }
 
     /// With `true`, every scene renders with the generic kernel (all features compiled in)
-    /// instead of one specialized to the scene: the same image (up to the rare ties between equally distant
-    /// hits, which a flat scan and a BVH walk may break differently), for speed comparisons.
+    /// instead of one specialized to the scene: the same image up to the rare ties between equally
+    /// distant hits, which a flat scan and a BVH walk may break differently, and last-bit differences
+    /// where the compiler folds literals differently from values it loads; for speed comparisons.
     pub fn with_generic_kernel(mut self, generic: bool) -> Self {
         self.generic = generic;
         self
@@ -179,7 +192,7 @@ impl<'a> Renderer<'a> {
     fn pipeline(&self, features: KernelFeatures, access: Option<String>) -> Result<wgpu::ComputePipeline, TraceError> {
         let mut pipelines = self.pipelines.lock().map_err(|_| TraceError::Gpu("a render panicked".into()))?;
         let key = (features, access);
-        if let Some(p) = pipelines.get(&key) {
+        if let Some(p) = pipelines.map.get(&key) {
             return Ok(p.clone());
         }
         let flag = |b: bool| if b { 1.0 } else { 0.0 };
@@ -214,7 +227,15 @@ impl<'a> Renderer<'a> {
                 self.gpu.info.name
             )));
         }
-        pipelines.insert(key, pipeline.clone());
+        if key.1.is_some() {
+            pipelines.scene_order.push_back(key.clone());
+            if pipelines.scene_order.len() > MAX_CACHED_KERNELS
+                && let Some(oldest) = pipelines.scene_order.pop_front()
+            {
+                pipelines.map.remove(&oldest);
+            }
+        }
+        pipelines.map.insert(key, pipeline.clone());
         Ok(pipeline)
     }
 

@@ -393,9 +393,9 @@ fn time_limit_renders_whole_passes_up_to_the_spp_cap() {
 /// flip a Russian-roulette decision, so the check allows 2 % of the pixels to differ by more than
 /// 1e-4 (relative) and the image means to differ by 0.5 %; a kernel that dropped a used feature
 /// (here the rough plastic sphere and the textured floor) changes far more. The textured scene and
-/// the box also check the flat triangle scan against the BVH walk; every scene here has its
-/// materials as literals, the box and the textured scene their light triangles, and the box has
-/// no vertex normals.
+/// the box also check the flat triangle scan against the BVH walk and have their triangles and
+/// light triangles written in as literals; every scene here has its materials as literals, and
+/// the box has no vertex normals.
 #[test]
 fn specialized_kernel_renders_what_the_generic_one_does() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/tests/mitsuba");
