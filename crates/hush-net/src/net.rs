@@ -161,6 +161,15 @@ impl Net {
         })
     }
 
+    /// The same network on detached copies of its weights (sharing their storage): its forward pass
+    /// records no graph, so a training run's evaluation frees each activation once the next layer
+    /// has used it instead of keeping them all for a backward pass that never comes.
+    pub fn frozen(&self) -> Result<Net> {
+        let tensors = self.named_tensors().into_iter().map(|(name, t)| (name, t.detach())).collect();
+        let device = self.device().clone();
+        Net::new(VarBuilder::from_tensors(tensors, candle_core::DType::F32, &device), &self.config())
+    }
+
     pub fn config(&self) -> NetConfig {
         match self {
             Net::UNet(n) => n.config().clone().into(),
@@ -278,6 +287,25 @@ mod tests {
 
         let err = serde_json::from_str::<NetConfig>(r#"{"kind":"resnet","in_channels":9}"#).unwrap_err();
         assert!(err.to_string().contains("patch_mlp"), "{err}");
+    }
+
+    /// A frozen copy computes what the trained network computes, without recording a graph.
+    #[test]
+    fn frozen_copies_compute_the_same_without_a_graph() -> Result<()> {
+        for cfg in [
+            NetConfig::from(UNetConfig { kind: UNetKind::UnetSmall, in_channels: 3, out_channels: 3, width: 0.25 }),
+            PatchMlpConfig::burger(3, 0.01, Activation::Tanh).into(),
+        ] {
+            let varmap = candle_nn::VarMap::new();
+            let net = Net::new(VarBuilder::from_varmap(&varmap, candle_core::DType::F32, &Device::Cpu), &cfg)?;
+            crate::unet::init_weights(&varmap, 3)?;
+            let x = Tensor::rand(0f32, 1f32, (1, 3, 16, 16), &Device::Cpu)?;
+            let (trained, frozen) = (net.forward_padded(&x)?, net.frozen()?.forward_padded(&x)?);
+            assert!(trained.track_op() && !frozen.track_op());
+            let diff = (trained - frozen)?.abs()?.max_all()?.to_scalar::<f32>()?;
+            assert_eq!(diff, 0.0);
+        }
+        Ok(())
     }
 
     #[test]

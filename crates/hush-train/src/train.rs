@@ -292,6 +292,7 @@ pub fn train(
 
 /// The mean loss over whole test images (each cropped centrally to a multiple of 16 per side).
 fn test_loss(net: &Net, cfg: &TrainConfig, test: &[TrainSample], device: &Device) -> Result<f64> {
+    let net = net.frozen()?;
     let mut sum = 0.0;
     for s in test {
         let (w, h) = (s.input.width, s.input.height);
@@ -301,7 +302,7 @@ fn test_loss(net: &Net, cfg: &TrainConfig, test: &[TrainSample], device: &Device
             let t = hwc_to_nchw(&im.data, w, h, im.channels, device)?;
             Ok(t.narrow(2, y0, h16)?.narrow(3, x0, w16)?)
         };
-        let output = net.forward(&crop(&s.input)?)?.detach();
+        let output = net.forward(&crop(&s.input)?)?;
         sum += cfg.loss.compute(&output, &crop(&s.target)?)?.to_dtype(DType::F64)?.to_scalar::<f64>()?;
     }
     Ok(sum / test.len() as f64)
