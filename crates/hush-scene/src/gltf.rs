@@ -23,7 +23,9 @@ use glam::{Mat4, Vec2, Vec3};
 
 use crate::shapes::Geometry;
 use crate::texture::srgb_to_linear;
-use crate::{Camera, Film, Material, Mesh, Microfacet, Reflectance, Scene, SceneError, Texture, TextureId};
+use crate::{
+    Camera, Film, Material, Mesh, Microfacet, PixelFilter, Reflectance, Scene, SceneError, Texture, TextureId,
+};
 
 const SUPPORTED_EXTENSIONS: &[&str] =
     &["KHR_materials_emissive_strength", "KHR_materials_transmission", "KHR_materials_ior"];
@@ -76,8 +78,12 @@ pub(crate) fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
     let (camera, aspect) = loader.camera.take().unzip();
     let aspect = aspect.flatten();
     let film = match aspect {
-        Some(a) => Film { width: ((FILM_HEIGHT as f32 * a).round() as u32).max(1), height: FILM_HEIGHT },
-        None => Film { width: 768, height: 576 },
+        Some(a) => Film {
+            width: ((FILM_HEIGHT as f32 * a).round() as u32).max(1),
+            height: FILM_HEIGHT,
+            filter: PixelFilter::Box,
+        },
+        None => Film { width: 768, height: 576, filter: PixelFilter::Box },
     };
     let mut out = Scene {
         camera: Camera { origin: Vec3::Z, target: Vec3::ZERO, up: Vec3::Y, fov_y_deg: 40.0 },

@@ -31,7 +31,8 @@ use roxmltree::{Document, Node};
 use crate::shapes;
 use crate::texture::{TextureCache, read_image, srgb_to_linear};
 use crate::{
-    Camera, ComplexIor, EnvMap, Environment, Film, Material, Mesh, Microfacet, Reflectance, Scene, SceneError, named,
+    Camera, ComplexIor, EnvMap, Environment, Film, Material, Mesh, Microfacet, PixelFilter, Reflectance, Scene,
+    SceneError, named,
 };
 
 impl Scene {
@@ -422,7 +423,7 @@ impl Parser<'_, '_> {
             self.vars.entry(name.to_string()).or_insert_with(|| value.to_string());
         }
         let mut camera = None;
-        let mut film = Film { width: DEFAULT_WIDTH, height: DEFAULT_HEIGHT };
+        let mut film = Film { width: DEFAULT_WIDTH, height: DEFAULT_HEIGHT, filter: PixelFilter::Box };
         let mut spp = None;
         let mut max_depth = u32::MAX;
         let mut meshes = Vec::new();
@@ -532,7 +533,7 @@ impl Parser<'_, '_> {
         let mut fov = None;
         let mut fov_axis = "x".to_string();
         let mut to_world = None;
-        let mut film = Film { width: DEFAULT_WIDTH, height: DEFAULT_HEIGHT };
+        let mut film = Film { width: DEFAULT_WIDTH, height: DEFAULT_HEIGHT, filter: PixelFilter::Box };
         let mut spp = None;
         for child in elements(node) {
             match (self.tag(child), self.name(child).as_deref()) {
@@ -604,12 +605,38 @@ impl Parser<'_, '_> {
         Ok(spp)
     }
 
+    /// A `<rfilter>`: `box`, or `tent` with its `radius` (Mitsuba's default 1); any other is a warning
+    /// and a box.
+    fn rfilter(&mut self, node: Node) -> Result<PixelFilter, SceneError> {
+        match self.attr(node, "type")?.as_str() {
+            "box" => Ok(PixelFilter::Box),
+            "tent" => {
+                let mut radius = 1.0;
+                for child in elements(node) {
+                    match (self.tag(child), self.name(child).as_deref()) {
+                        ("float", Some("radius")) => radius = self.float(child)?,
+                        _ => self.ignored(child, "<rfilter type=\"tent\">"),
+                    }
+                }
+                if !(radius.is_finite() && radius > 0.0 && radius <= 16.0) {
+                    return Err(self.err(node, format!("tent filter radius {radius} is not in (0, 16] pixels")));
+                }
+                Ok(PixelFilter::Tent { radius })
+            }
+            f => {
+                self.warn(node, format!("reconstruction filter '{f}' is not supported yet: hush uses a box filter"));
+                Ok(PixelFilter::Box)
+            }
+        }
+    }
+
     fn film(&mut self, node: Node) -> Result<Film, SceneError> {
         let ty = self.attr(node, "type")?;
         if ty != "hdrfilm" {
             self.warn(node, format!("film '{ty}' is not supported: hush writes an HDR OpenEXR film"));
         }
-        let mut film = Film { width: DEFAULT_WIDTH, height: DEFAULT_HEIGHT };
+        let mut film = Film { width: DEFAULT_WIDTH, height: DEFAULT_HEIGHT, filter: PixelFilter::Box };
+        let mut has_filter = false;
         for child in elements(node) {
             match (self.tag(child), self.name(child).as_deref()) {
                 ("integer", Some(dim @ ("width" | "height"))) => {
@@ -620,13 +647,8 @@ impl Parser<'_, '_> {
                     if dim == "width" { film.width = v as u32 } else { film.height = v as u32 }
                 }
                 ("rfilter", _) => {
-                    let f = self.attr(child, "type")?;
-                    if f != "box" {
-                        self.warn(
-                            child,
-                            format!("reconstruction filter '{f}' is not supported yet: hush uses a box filter"),
-                        );
-                    }
+                    film.filter = self.rfilter(child)?;
+                    has_filter = true;
                 }
                 // Output encodings: hush always writes float RGB OpenEXR, without a banner.
                 ("string", Some("file_format" | "pixel_format" | "component_format")) | ("boolean", Some("banner")) => {
@@ -634,6 +656,9 @@ impl Parser<'_, '_> {
                 }
                 _ => self.ignored(child, "<film>"),
             }
+        }
+        if !has_filter {
+            self.warn(node, "the film names no <rfilter>: Mitsuba's default is 'gaussian', which hush does not support yet: hush uses a box filter");
         }
         Ok(film)
     }

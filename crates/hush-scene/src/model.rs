@@ -41,11 +41,23 @@ impl Camera {
     }
 }
 
-/// Image size in pixels.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// Image size in pixels and the pixel filter.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Film {
     pub width: u32,
     pub height: u32,
+    pub filter: PixelFilter,
+}
+
+/// How a pixel weighs the radiance around it (Mitsuba's `rfilter`), in pixels from its centre.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum PixelFilter {
+    /// The pixel's square, uniformly.
+    #[default]
+    Box,
+    /// `max(0, 1 − |x| / radius) · max(0, 1 − |y| / radius)`, normalized (Mitsuba's `tent`; radius 1 by
+    /// default): neighbouring pixels share samples near their border.
+    Tent { radius: f32 },
 }
 
 /// Index of a [`Texture`] in [`Scene::textures`].

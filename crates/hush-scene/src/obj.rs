@@ -9,7 +9,7 @@ use glam::{Vec2, Vec3};
 
 use crate::shapes::Geometry;
 use crate::texture::TextureCache;
-use crate::{Film, Material, Mesh, Microfacet, Reflectance, Scene, SceneError};
+use crate::{Film, Material, Mesh, Microfacet, PixelFilter, Reflectance, Scene, SceneError};
 
 /// One object (or one material run of an object) of an OBJ file.
 pub(crate) struct ObjObject {
@@ -172,7 +172,7 @@ pub(crate) fn load_obj_scene(path: &Path) -> Result<Scene, SceneError> {
     if meshes.is_empty() {
         return Err(SceneError::new(path, None, "OBJ file holds no (non-degenerate) triangles"));
     }
-    let film = Film { width: 768, height: 576 };
+    let film = Film { width: 768, height: 576, filter: PixelFilter::Box };
     let mut scene = Scene {
         camera: crate::model::Camera { origin: Vec3::Z, target: Vec3::ZERO, up: Vec3::Y, fov_y_deg: 40.0 },
         film,

@@ -21,6 +21,8 @@ struct Params {
     max_depth: u32,
     tri_count: u32,
     light_count: u32,
+    // 0: box filter; otherwise the tent filter's radius in pixels.
+    filter_radius: f32,
 }
 
 // A triangle for intersection. p0.w: material index (bits); e1.w: probability density per
@@ -306,12 +308,23 @@ struct PathState {
     out: Sample,
 }
 
+// Maps u in [0, 1) to [-1, 1] with density 1 − |x| (inverting the tent's distribution function).
+fn tent(u: f32) -> f32 {
+    return select(1.0 - sqrt(2.0 - 2.0 * u), sqrt(2.0 * u) - 1.0, u < 0.5);
+}
+
 // Seeds the random stream of (pixel, sample index, seed) and starts that sample's camera ray.
 fn start_path(pixel: vec2<u32>, pixel_index: u32, sample_index: u32) -> PathState {
     rng_state = pcg(pixel_index ^ pcg(sample_index ^ pcg(params.seed_lo ^ pcg(params.seed_hi))));
-    // Box filter: a uniform point inside the pixel. Row 0 is the top of the image.
-    let fx = (f32(pixel.x) + rand()) / f32(params.width);
-    let fy = (f32(pixel.y) + rand()) / f32(params.height);
+    // A point in the pixel's filter, drawn in proportion to the filter (filter importance sampling,
+    // so every sample weighs the same): box, a uniform point in the pixel; tent, a point around
+    // its centre from the tent's density. Row 0 is the top of the image.
+    var jitter = vec2<f32>(rand(), rand());
+    if params.filter_radius > 0.0 {
+        jitter = vec2<f32>(0.5) + params.filter_radius * vec2<f32>(tent(jitter.x), tent(jitter.y));
+    }
+    let fx = (f32(pixel.x) + jitter.x) / f32(params.width);
+    let fy = (f32(pixel.y) + jitter.y) / f32(params.height);
     let d = normalize(params.forward.xyz + (2.0 * fx - 1.0) * params.right.xyz + (1.0 - 2.0 * fy) * params.up.xyz);
     let zero = vec3<f32>(0.0);
     return PathState(params.origin.xyz, d, vec3<f32>(1.0), 0.0, true, false, 0u, Sample(zero, zero, zero, zero, zero));

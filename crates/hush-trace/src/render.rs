@@ -4,7 +4,7 @@ use std::time::{Duration, Instant};
 
 use bytemuck::{Pod, Zeroable};
 use hush_dataset::Image;
-use hush_scene::Scene;
+use hush_scene::{PixelFilter, Scene};
 use wgpu::util::DeviceExt;
 
 use crate::upload::{GpuLight, GpuMaterial, GpuNode, GpuNormals, GpuTri, KernelFeatures, flatten};
@@ -106,7 +106,8 @@ struct Params {
     max_depth: u32,
     tri_count: u32,
     light_count: u32,
-    pad: [u32; 3],
+    filter_radius: f32,
+    pad: [u32; 2],
 }
 
 /// Compiled kernels on one device: the generic kernel and the specialized ones rendered so far,
@@ -375,7 +376,11 @@ impl<'a> Renderer<'a> {
             max_depth: scene.max_depth,
             tri_count: flat.tris.len() as u32,
             light_count: flat.lights.len() as u32,
-            pad: [0; 3],
+            filter_radius: match scene.film.filter {
+                PixelFilter::Box => 0.0,
+                PixelFilter::Tent { radius } => radius,
+            },
+            pad: [0; 2],
         };
         let paths_per_dispatch = if time_limit.is_some() { PATHS_PER_TIMED_DISPATCH } else { PATHS_PER_DISPATCH };
         let per_dispatch = (paths_per_dispatch / pixels).clamp(1, MAX_SAMPLES_PER_DISPATCH) as u32;

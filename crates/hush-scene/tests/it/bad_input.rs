@@ -46,6 +46,21 @@ fn unsupported_elements_are_named_warnings() {
     let w = load_xml(&dir, xml).warnings;
     assert_warned(&w, &["scene.xml:4:", "gaussian", "box filter"]);
     assert_warned(&w, &["scene.xml:3:", "stratified", "independently"]);
+    // A tent takes its radius (Mitsuba's default 1); a radius that is no size is an error on its line.
+    let tent = |inner: &str| {
+        format!(
+            r#"<scene version="3.0.0"><sensor type="perspective"><float name="fov" value="40"/>
+      <transform name="to_world"><lookat origin="0,0,4" target="0,0,0"/></transform><film type="hdrfilm">
+      <rfilter type="tent">{inner}</rfilter></film></sensor><shape type="cube"/></scene>"#
+        )
+    };
+    assert_eq!(load_xml(&dir, &tent("")).film.filter, hush_scene::PixelFilter::Tent { radius: 1.0 });
+    let unfiltered = tent("").replace(r#"<rfilter type="tent"></rfilter>"#, "");
+    assert_warned(&load_xml(&dir, &unfiltered).warnings, &["scene.xml:2:", "no <rfilter>", "gaussian", "box filter"]);
+    let wide = load_xml(&dir, &tent(r#"<float name="radius" value="1.5"/>"#));
+    assert_eq!(wide.film.filter, hush_scene::PixelFilter::Tent { radius: 1.5 });
+    let err = load_err(&dir, &tent(r#"<float name="radius" value="0"/>"#));
+    assert!(err.contains("scene.xml:3:") && err.contains("radius 0"), "{err}");
 }
 
 #[test]

@@ -34,7 +34,7 @@ fn scratch(name: &str) -> PathBuf {
 
 const SENSOR: &str = r#"<sensor type="perspective"><float name="fov" value="40"/>
   <transform name="to_world"><lookat origin="0,0,4" target="0,0,0" up="0,1,0"/></transform>
-  <film type="hdrfilm"><integer name="width" value="32"/><integer name="height" value="32"/></film></sensor>"#;
+  <film type="hdrfilm"><integer name="width" value="32"/><integer name="height" value="32"/><rfilter type="box"/></film></sensor>"#;
 
 /// Writes `xml` as `scene.xml` in `dir` and loads it.
 fn load_xml(dir: &Path, xml: &str) -> Scene {

@@ -76,7 +76,7 @@ fn mitsuba06_camera_from_lookat_in_a_camel_case_transform() {
       <sensor type="perspective"><float name="fov" value="90"/><string name="fovAxis" value="y"/>
         <transform name="toWorld"><lookAt origin="1,2,3" target="1,2,0" up="0,1,0"/></transform>
         <sampler type="independent"><integer name="sampleCount" value="7"/></sampler>
-        <film type="hdrfilm"><integer name="width" value="20"/><integer name="height" value="10"/></film></sensor>
+        <film type="hdrfilm"><integer name="width" value="20"/><integer name="height" value="10"/><rfilter type="box"/></film></sensor>
       <shape type="sphere"/></scene>"#;
     let s = Scene::from_mitsuba_str(xml, Path::new("t.xml")).unwrap();
     assert_eq!((s.max_depth, s.spp), (5, Some(7)));

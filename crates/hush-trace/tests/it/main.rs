@@ -463,3 +463,42 @@ fn vertex_normals_choose_the_front_side() {
     let out = render(&scene, 4, 1);
     assert!(out.color.mean()[0] > 0.01, "the floor should be lit: mean {:?}", out.color.mean());
 }
+
+/// The tent filter against its closed form: the camera sees an emitter of radiance 1 over the right
+/// half of the image, its edge on the border between columns 7 and 8 of 16. A tent of radius 1
+/// (Mitsuba's default) centred half a pixel from the edge covers it with 1/8 of its mass, so the
+/// columns read 0, 1/8, 7/8, 1 around the edge, where the box filter gives 0, 0, 1, 1. Each column
+/// mean holds 4 × 4096 samples, each 0 or 1: its standard error is at most 0.004 (p = 1/2), and the
+/// tolerance is 0.02, 5 of those; a radius of 2 would read 0.28 beside the edge.
+#[test]
+fn tent_filter_matches_its_closed_form() {
+    let dir = std::env::temp_dir().join(format!("hush-tent-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    for (filter, expect) in
+        [("<rfilter type=\"tent\"/>", [0.0, 0.125, 0.875, 1.0]), ("<rfilter type=\"box\"/>", [0.0, 0.0, 1.0, 1.0])]
+    {
+        let xml = format!(
+            r#"<scene version="3.0.0">
+  <integrator type="path"><integer name="max_depth" value="1"/></integrator>
+  <sensor type="perspective">
+    <float name="fov" value="60"/>
+    <transform name="to_world"><lookat origin="0, 0, 0" target="0, 0, -1" up="0, 1, 0"/></transform>
+    <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="4"/>{filter}</film>
+  </sensor>
+  <shape type="rectangle">
+    <transform name="to_world"><scale x="10" y="10"/><translate x="10" z="-1"/></transform>
+    <emitter type="area"><rgb name="radiance" value="1, 1, 1"/></emitter>
+  </shape>
+</scene>"#
+        );
+        std::fs::write(dir.join("scene.xml"), xml).unwrap();
+        let scene = Scene::load(&dir.join("scene.xml")).unwrap();
+        let out = render(&scene, 4096, 9);
+        for (k, want) in expect.iter().enumerate() {
+            let column = 6 + k;
+            let mean = (0..4).map(|y| out.color.data[(y * 16 + column) * 3]).sum::<f32>() / 4.0;
+            assert!((mean - want).abs() <= 0.02, "{filter}: column {column} reads {mean}, expected {want}");
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
