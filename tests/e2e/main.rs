@@ -92,7 +92,7 @@ fn render_writes_every_layer() {
     let dir = scratch("render");
     let out = dir.join("box.exr");
     let stats = dir.join("stats.json");
-    expect_success(&[
+    let stderr = expect_success(&[
         "render",
         s(&cbox()),
         "--spp",
@@ -106,6 +106,8 @@ fn render_writes_every_layer() {
         "--stats",
         s(&stats),
     ]);
+    // The box's kernel holds its triangles, materials and lights as literals, and says so.
+    assert!(stderr.contains("written in: 36 triangles, 8 materials, 2 light triangles"), "{stderr}");
     let exr = hush_dataset::read_exr(&out).unwrap();
     let mut names: Vec<&str> = exr.channels.keys().map(String::as_str).collect();
     names.sort_unstable();

@@ -7,6 +7,7 @@ use hush_dataset::Image;
 use hush_scene::{PixelFilter, Scene};
 use wgpu::util::DeviceExt;
 
+use crate::scan::SceneLiterals;
 use crate::upload::{GpuLight, GpuMaterial, GpuNode, GpuNormals, GpuTri, KernelFeatures, flatten};
 use crate::{GpuContext, TraceError};
 
@@ -32,6 +33,11 @@ pub fn kernel_source(scene: &Scene, generic: bool) -> Result<String, TraceError>
         Some(access) => format!("{KERNEL_BODY}{access}"),
         None => KERNEL_SOURCE.to_string(),
     })
+}
+
+/// What of `scene` the kernel the renderer compiles for it holds as literals (nothing with `generic`).
+pub fn kernel_literals(scene: &Scene, generic: bool) -> Result<SceneLiterals, TraceError> {
+    Ok(if generic { SceneLiterals::default() } else { crate::scan::literals(&flatten(scene)?) })
 }
 
 /// The scene's own access functions, when its kernel has any.

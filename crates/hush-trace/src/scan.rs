@@ -58,18 +58,50 @@ fn material_literal(m: &GpuMaterial) -> String {
     format!("array<vec4<u32>, 6>({})", fields.join(", "))
 }
 
+/// What of a scene its specialized kernel holds as literals (0: read from the buffer).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SceneLiterals {
+    pub triangles: usize,
+    pub materials: usize,
+    pub light_triangles: usize,
+}
+
+impl std::fmt::Display for SceneLiterals {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let parts: Vec<String> =
+            [(self.triangles, "triangles"), (self.materials, "materials"), (self.light_triangles, "light triangles")]
+                .iter()
+                .filter(|(n, _)| *n > 0)
+                .map(|(n, what)| format!("{n} {what}"))
+                .collect();
+        if parts.is_empty() { write!(f, "nothing") } else { write!(f, "{}", parts.join(", ")) }
+    }
+}
+
+/// Which parts of `flat` are written in.
+pub(crate) fn literals(flat: &GpuScene) -> SceneLiterals {
+    let tris = || flat.tris.iter().flat_map(|t| [&t.p0, &t.e1, &t.e2]);
+    let emissions = || flat.materials.iter().map(|m| &m.emission);
+    let scan = flat.features.flat_scan && finite(tris());
+    let material = flat.materials.len() <= MAX_LITERAL_MATERIALS;
+    let light = !flat.lights.is_empty()
+        && flat.lights.len() <= MAX_LITERAL_LIGHTS
+        && finite(emissions())
+        && flat.lights.iter().all(|l| l.cdf.is_finite());
+    SceneLiterals {
+        triangles: if scan { flat.tris.len() } else { 0 },
+        materials: if material { flat.materials.len() } else { 0 },
+        light_triangles: if light { flat.lights.len() } else { 0 },
+    }
+}
+
 /// The scene-access source for `flat` (the generic functions for the parts it is too large
 /// for), or `None` when every part would be generic.
 pub(crate) fn scene_source(flat: &GpuScene) -> Option<String> {
-    let tris = || flat.tris.iter().flat_map(|t| [&t.p0, &t.e1, &t.e2]);
-    let scan = (flat.features.flat_scan && finite(tris())).then(|| scan_source(flat));
-    let material = (flat.materials.len() <= MAX_LITERAL_MATERIALS).then(|| material_source(&flat.materials));
-    let emissions = || flat.materials.iter().map(|m| &m.emission);
-    let light = (!flat.lights.is_empty()
-        && flat.lights.len() <= MAX_LITERAL_LIGHTS
-        && finite(emissions())
-        && flat.lights.iter().all(|l| l.cdf.is_finite()))
-    .then(|| light_source(flat));
+    let parts = literals(flat);
+    let scan = (parts.triangles > 0).then(|| scan_source(flat));
+    let material = (parts.materials > 0).then(|| material_source(&flat.materials));
+    let light = (parts.light_triangles > 0).then(|| light_source(flat));
     if scan.is_none() && material.is_none() && light.is_none() {
         return None;
     }
