@@ -107,7 +107,10 @@ fn render_writes_every_layer() {
         s(&stats),
     ]);
     // The box's kernel holds its triangles, materials and lights as literals, and says so.
-    assert!(stderr.contains("written in: 36 triangles, 8 materials, 2 light triangles"), "{stderr}");
+    assert!(
+        stderr.contains("scene data written into the kernel: 36 triangles, 8 materials, 2 light triangles"),
+        "{stderr}"
+    );
     let exr = hush_dataset::read_exr(&out).unwrap();
     let mut names: Vec<&str> = exr.channels.keys().map(String::as_str).collect();
     names.sort_unstable();

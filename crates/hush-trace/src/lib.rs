@@ -24,9 +24,7 @@ mod scan;
 mod upload;
 
 pub use gpu::{GpuContext, INSTALL_HINT};
-pub use render::{
-    KERNEL_SOURCE, MAX_CACHED_KERNELS, RenderOutput, RenderSettings, Renderer, kernel_literals, kernel_source,
-};
+pub use render::{KERNEL_SOURCE, MAX_CACHED_KERNELS, RenderOutput, RenderSettings, Renderer, kernel_source};
 pub use scan::SceneLiterals;
 pub use upload::KernelFeatures;
 

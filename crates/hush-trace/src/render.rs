@@ -7,7 +7,7 @@ use hush_dataset::Image;
 use hush_scene::{PixelFilter, Scene};
 use wgpu::util::DeviceExt;
 
-use crate::scan::SceneLiterals;
+use crate::scan::{SceneLiterals, scene_source};
 use crate::upload::{GpuLight, GpuMaterial, GpuNode, GpuNormals, GpuTri, KernelFeatures, flatten};
 use crate::{GpuContext, TraceError};
 
@@ -29,20 +29,16 @@ const KERNEL_BODY: &str = concat!(include_str!("bsdf.wgsl"), include_str!("env.w
 /// the source with what of the scene is small enough written in as literals (see `scan.rs`).
 /// Which features are compiled out is set by pipeline constants, not in the source.
 pub fn kernel_source(scene: &Scene, generic: bool) -> Result<String, TraceError> {
-    Ok(match specialized_scene(&flatten(scene)?, generic) {
+    let flat = flatten(scene)?;
+    Ok(match scene_source(&flat, scene_literals(&flat, generic)) {
         Some(access) => format!("{KERNEL_BODY}{access}"),
         None => KERNEL_SOURCE.to_string(),
     })
 }
 
-/// What of `scene` the kernel the renderer compiles for it holds as literals (nothing with `generic`).
-pub fn kernel_literals(scene: &Scene, generic: bool) -> Result<SceneLiterals, TraceError> {
-    Ok(if generic { SceneLiterals::default() } else { crate::scan::literals(&flatten(scene)?) })
-}
-
-/// The scene's own access functions, when its kernel has any.
-fn specialized_scene(flat: &crate::upload::GpuScene, generic: bool) -> Option<String> {
-    if generic { None } else { crate::scan::scene_source(flat) }
+/// What of `flat` a kernel holds as literals: nothing for the generic one.
+fn scene_literals(flat: &crate::upload::GpuScene, generic: bool) -> SceneLiterals {
+    if generic { SceneLiterals::default() } else { crate::scan::literals(flat) }
 }
 
 /// Floats per pixel in the accumulation buffer; mirrors `ACCUM_STRIDE` in the kernel.
@@ -91,6 +87,8 @@ pub struct RenderOutput {
     pub passes: u32,
     /// Non-finite path samples the kernel discarded (0 in a correct render).
     pub discarded_samples: u64,
+    /// What of the scene the kernel held as literals (nothing for the generic kernel).
+    pub literals: SceneLiterals,
     /// Wall-clock seconds spent tracing (upload and read-back included; compiling the kernel
     /// specialized to the scene, once per set of features and scene data written in, is not).
     pub seconds: f64,
@@ -346,7 +344,8 @@ impl<'a> Renderer<'a> {
         });
         let features = if self.generic { KernelFeatures::ALL } else { flat.features };
         let compile = Instant::now();
-        let pipeline = self.pipeline(features, specialized_scene(&flat, self.generic))?;
+        let literals = scene_literals(&flat, self.generic);
+        let pipeline = self.pipeline(features, scene_source(&flat, literals))?;
         start += compile.elapsed();
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("path"),
@@ -433,6 +432,7 @@ impl<'a> Renderer<'a> {
 
         let mut out = unpack(&data, w as usize, h as usize, done);
         out.passes = passes;
+        out.literals = literals;
         out.seconds = start.elapsed().as_secs_f64();
         Ok(out)
     }
@@ -473,6 +473,7 @@ fn unpack(data: &[f32], w: usize, h: usize, spp: u32) -> RenderOutput {
         spp,
         passes: 0,
         discarded_samples: discarded,
+        literals: SceneLiterals::default(),
         seconds: 0.0,
     }
 }

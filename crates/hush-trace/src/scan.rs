@@ -95,10 +95,9 @@ pub(crate) fn literals(flat: &GpuScene) -> SceneLiterals {
     }
 }
 
-/// The scene-access source for `flat` (the generic functions for the parts it is too large
-/// for), or `None` when every part would be generic.
-pub(crate) fn scene_source(flat: &GpuScene) -> Option<String> {
-    let parts = literals(flat);
+/// The scene-access source for `flat` with `parts` ([`literals`]) written in (the generic
+/// functions for the others), or `None` when every part would be generic.
+pub(crate) fn scene_source(flat: &GpuScene, parts: SceneLiterals) -> Option<String> {
     let scan = (parts.triangles > 0).then(|| scan_source(flat));
     let material = (parts.materials > 0).then(|| material_source(&flat.materials));
     let light = (parts.light_triangles > 0).then(|| light_source(flat));

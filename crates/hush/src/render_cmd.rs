@@ -117,11 +117,11 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let gpu = open_gpu()?;
     let renderer = Renderer::new(&gpu)?.with_generic_kernel(args.generic);
     let kernel = if args.generic { KernelFeatures::ALL } else { KernelFeatures::of(&scene) };
-    let literals = hush_trace::kernel_literals(&scene, args.generic)?;
-    eprintln!("scene: {} triangles; kernel: {kernel:?}; written in: {literals}", scene.triangle_count());
+    eprintln!("scene: {} triangles; kernel: {kernel:?}", scene.triangle_count());
     let cpu0 = cpu_seconds();
     let out = render_with_progress(&renderer, &scene, &RenderSettings { spp, seed: args.seed }, time_limit, "render")?;
     let cpu = cpu_seconds() - cpu0;
+    eprintln!("scene data written into the kernel: {}", out.literals);
     write_exr(
         &args.out,
         &[
