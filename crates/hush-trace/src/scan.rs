@@ -12,7 +12,7 @@
 //!   cumulative distribution, which picks what the buffer's binary search picks.
 //!
 //! Each part the scene is too large for keeps the generic function (`scene_*.wgsl`). Literal
-//! materials help BVH scenes too (veach-mis, 8 materials: 0.30 against 0.27–0.28 M paths per
+//! materials help BVH scenes too (veach-mis, 9 materials: 0.30 against 0.27–0.28 M paths per
 //! CPU-second on lavapipe); the price is a compilation per scene (about a CPU-second there).
 
 use std::fmt::Write;
@@ -20,9 +20,9 @@ use std::fmt::Write;
 use crate::upload::{GpuMaterial, GpuScene};
 
 /// The generic scene access, in the order the kernel source concatenates it.
-pub(crate) const GENERIC_SCAN: &str = include_str!("scene_scan.wgsl");
-pub(crate) const GENERIC_MATERIAL: &str = include_str!("scene_material.wgsl");
-pub(crate) const GENERIC_LIGHT: &str = include_str!("scene_light.wgsl");
+const GENERIC_SCAN: &str = include_str!("scene_scan.wgsl");
+const GENERIC_MATERIAL: &str = include_str!("scene_material.wgsl");
+const GENERIC_LIGHT: &str = include_str!("scene_light.wgsl");
 
 /// Scenes with at most this many materials get them as literals. A lookup then costs a selection
 /// per material (on a CPU driver each runs in every lane) instead of a load per lane.
@@ -99,7 +99,8 @@ pub(crate) fn literals(flat: &GpuScene) -> SceneLiterals {
 /// functions for the others), or `None` when every part would be generic.
 pub(crate) fn scene_source(flat: &GpuScene, parts: SceneLiterals) -> Option<String> {
     let scan = (parts.triangles > 0).then(|| scan_source(flat));
-    let material = (parts.materials > 0).then(|| material_source(&flat.materials));
+    let material =
+        flat.materials.split_first().filter(|_| parts.materials > 0).map(|(m0, rest)| material_source(m0, rest));
     let light = (parts.light_triangles > 0).then(|| light_source(flat));
     if scan.is_none() && material.is_none() && light.is_none() {
         return None;
@@ -133,22 +134,16 @@ fn scan_source(flat: &GpuScene) -> String {
     s
 }
 
-/// `material` as a chain of selections.
-fn material_source(materials: &[GpuMaterial]) -> String {
+/// `material` as a chain of selections: `first` is material 0, `rest` the others in order.
+fn material_source(first: &GpuMaterial, rest: &[GpuMaterial]) -> String {
     let mut s = String::from("\n// The scene's materials as literals.\nfn material(i: u32) -> Material {\n");
-    match materials.split_first() {
-        None => s.push_str("    return materials[i];\n"),
-        Some((first, rest)) => {
-            let _ = writeln!(s, "    var m = {};", material_literal(first));
-            for (k, m) in rest.iter().enumerate() {
-                let _ = writeln!(s, "    if i == {}u {{\n        m = {};\n    }}", k + 1, material_literal(m));
-            }
-            s.push_str("    let f = array<vec4<f32>, 6>(bitcast<vec4<f32>>(m[0]), bitcast<vec4<f32>>(m[1]), ");
-            s.push_str("bitcast<vec4<f32>>(m[2]), bitcast<vec4<f32>>(m[3]), bitcast<vec4<f32>>(m[4]), ");
-            s.push_str("bitcast<vec4<f32>>(m[5]));\n    return Material(f[0], f[1], f[2], f[3], f[4], f[5]);\n");
-        }
+    let _ = writeln!(s, "    var m = {};", material_literal(first));
+    for (k, m) in rest.iter().enumerate() {
+        let _ = writeln!(s, "    if i == {}u {{\n        m = {};\n    }}", k + 1, material_literal(m));
     }
-    s.push_str("}\n");
+    s.push_str("    let f = array<vec4<f32>, 6>(bitcast<vec4<f32>>(m[0]), bitcast<vec4<f32>>(m[1]), ");
+    s.push_str("bitcast<vec4<f32>>(m[2]), bitcast<vec4<f32>>(m[3]), bitcast<vec4<f32>>(m[4]), ");
+    s.push_str("bitcast<vec4<f32>>(m[5]));\n    return Material(f[0], f[1], f[2], f[3], f[4], f[5]);\n}\n");
     s
 }
 
