@@ -100,14 +100,11 @@ def load_scene(mi, path, width=None, height=None, max_depth=None):
                 node = ET.SubElement(film, "integer", name=name)
             node.set("value", str(value))
             edits.append(f"film {name} {value}")
-    if film.find("rfilter") is None:
-        ET.SubElement(film, "rfilter", type="box")
-        edits.append("rfilter (default gaussian) -> box (what hush uses for it)")
     for node in list(film):
         if node.get("name") in ("highQualityEdges", "high_quality_edges"):
             film.remove(node)
             edits.append(f"dropped film {node.get('name')} (not in Mitsuba 3)")
-        elif node.tag == "rfilter" and node.get("type") not in ("box", "tent"):
+        elif node.tag == "rfilter" and node.get("type") not in ("box", "tent", "gaussian"):
             edits.append(f"rfilter {node.get('type')} -> box (what hush uses for it)")
             node.attrib = {"type": "box"}
             node[:] = []

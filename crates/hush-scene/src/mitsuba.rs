@@ -423,7 +423,7 @@ impl Parser<'_, '_> {
             self.vars.entry(name.to_string()).or_insert_with(|| value.to_string());
         }
         let mut camera = None;
-        let mut film = Film { width: DEFAULT_WIDTH, height: DEFAULT_HEIGHT, filter: PixelFilter::Box };
+        let mut film = Film { width: DEFAULT_WIDTH, height: DEFAULT_HEIGHT, filter: PixelFilter::MITSUBA_DEFAULT };
         let mut spp = None;
         let mut max_depth = u32::MAX;
         let mut meshes = Vec::new();
@@ -533,7 +533,7 @@ impl Parser<'_, '_> {
         let mut fov = None;
         let mut fov_axis = "x".to_string();
         let mut to_world = None;
-        let mut film = Film { width: DEFAULT_WIDTH, height: DEFAULT_HEIGHT, filter: PixelFilter::Box };
+        let mut film = Film { width: DEFAULT_WIDTH, height: DEFAULT_HEIGHT, filter: PixelFilter::MITSUBA_DEFAULT };
         let mut spp = None;
         for child in elements(node) {
             match (self.tag(child), self.name(child).as_deref()) {
@@ -605,8 +605,8 @@ impl Parser<'_, '_> {
         Ok(spp)
     }
 
-    /// A `<rfilter>`: `box`, or `tent` with its `radius` (Mitsuba's default 1); any other is a warning
-    /// and a box.
+    /// A `<rfilter>`: `box`, `tent` with its `radius` (Mitsuba's default 1) or `gaussian` with its
+    /// `stddev` (0.5); any other is a warning and a box.
     fn rfilter(&mut self, node: Node) -> Result<PixelFilter, SceneError> {
         match self.attr(node, "type")?.as_str() {
             "box" => Ok(PixelFilter::Box),
@@ -623,6 +623,19 @@ impl Parser<'_, '_> {
                 }
                 Ok(PixelFilter::Tent { radius })
             }
+            "gaussian" => {
+                let mut stddev = 0.5;
+                for child in elements(node) {
+                    match (self.tag(child), self.name(child).as_deref()) {
+                        ("float", Some("stddev")) => stddev = self.float(child)?,
+                        _ => self.ignored(child, "<rfilter type=\"gaussian\">"),
+                    }
+                }
+                if !(stddev.is_finite() && stddev > 0.0 && stddev <= 4.0) {
+                    return Err(self.err(node, format!("gaussian filter stddev {stddev} is not in (0, 4] pixels")));
+                }
+                Ok(PixelFilter::Gaussian { stddev })
+            }
             f => {
                 self.warn(node, format!("reconstruction filter '{f}' is not supported yet: hush uses a box filter"));
                 Ok(PixelFilter::Box)
@@ -635,8 +648,7 @@ impl Parser<'_, '_> {
         if ty != "hdrfilm" {
             self.warn(node, format!("film '{ty}' is not supported: hush writes an HDR OpenEXR film"));
         }
-        let mut film = Film { width: DEFAULT_WIDTH, height: DEFAULT_HEIGHT, filter: PixelFilter::Box };
-        let mut has_filter = false;
+        let mut film = Film { width: DEFAULT_WIDTH, height: DEFAULT_HEIGHT, filter: PixelFilter::MITSUBA_DEFAULT };
         for child in elements(node) {
             match (self.tag(child), self.name(child).as_deref()) {
                 ("integer", Some(dim @ ("width" | "height"))) => {
@@ -646,19 +658,13 @@ impl Parser<'_, '_> {
                     }
                     if dim == "width" { film.width = v as u32 } else { film.height = v as u32 }
                 }
-                ("rfilter", _) => {
-                    film.filter = self.rfilter(child)?;
-                    has_filter = true;
-                }
+                ("rfilter", _) => film.filter = self.rfilter(child)?,
                 // Output encodings: hush always writes float RGB OpenEXR, without a banner.
                 ("string", Some("file_format" | "pixel_format" | "component_format")) | ("boolean", Some("banner")) => {
                     self.string(child)?;
                 }
                 _ => self.ignored(child, "<film>"),
             }
-        }
-        if !has_filter {
-            self.warn(node, "the film names no <rfilter>: Mitsuba's default is 'gaussian', which hush does not support yet: hush uses a box filter");
         }
         Ok(film)
     }

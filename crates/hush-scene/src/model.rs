@@ -58,6 +58,14 @@ pub enum PixelFilter {
     /// `max(0, 1 − |x| / radius) · max(0, 1 − |y| / radius)`, normalized (Mitsuba's `tent`; radius 1 by
     /// default): neighbouring pixels share samples near their border.
     Tent { radius: f32 },
+    /// `g(x) · g(y)` with `g(x) = max(0, exp(−x² / 2σ²) − exp(−8))`, zero beyond 4σ, normalized (Mitsuba's
+    /// `gaussian`, the filter of a Mitsuba film that names none; σ = 0.5 by default).
+    Gaussian { stddev: f32 },
+}
+
+impl PixelFilter {
+    /// Mitsuba's filter when a film names none.
+    pub const MITSUBA_DEFAULT: PixelFilter = PixelFilter::Gaussian { stddev: 0.5 };
 }
 
 /// Index of a [`Texture`] in [`Scene::textures`].

@@ -21,9 +21,15 @@ struct Params {
     max_depth: u32,
     tri_count: u32,
     light_count: u32,
-    // 0: box filter; otherwise the tent filter's radius in pixels.
-    filter_radius: f32,
+    // The pixel filter: FILTER_BOX, FILTER_TENT (width: its radius) or FILTER_GAUSSIAN (width: its
+    // standard deviation), in pixels.
+    filter_kind: u32,
+    filter_width: f32,
 }
+
+const FILTER_BOX: u32 = 0u;
+const FILTER_TENT: u32 = 1u;
+const FILTER_GAUSSIAN: u32 = 2u;
 
 // A triangle for intersection. p0.w: material index (bits); e1.w: probability density per
 // unit area of picking a point on this triangle by light sampling (0 if not emissive).
@@ -313,6 +319,22 @@ fn tent(u: f32) -> f32 {
     return select(1.0 - sqrt(2.0 - 2.0 * u), sqrt(2.0 * u) - 1.0, u < 0.5);
 }
 
+// A sample in units of σ from Mitsuba's windowed Gaussian, density ∝ max(0, exp(−x²/2) − exp(−8))
+// on [−4, 4], by rejection: a normal from u and a second number (Box–Muller), redrawn until it
+// lies in the window, kept with probability (exp(−x²/2) − exp(−8)) / exp(−x²/2) (about 99.97 %).
+fn windowed_normal(u: f32) -> f32 {
+    var a = u;
+    var x = 0.0;
+    loop {
+        x = sqrt(-2.0 * log(1.0 - a)) * cos(2.0 * PI * rand());
+        if abs(x) <= 4.0 && rand() * exp(-0.5 * x * x) >= 3.3546262e-4 {
+            break;
+        }
+        a = rand();
+    }
+    return x;
+}
+
 // Seeds the random stream of (pixel, sample index, seed) and starts that sample's camera ray.
 fn start_path(pixel: vec2<u32>, pixel_index: u32, sample_index: u32) -> PathState {
     rng_state = pcg(pixel_index ^ pcg(sample_index ^ pcg(params.seed_lo ^ pcg(params.seed_hi))));
@@ -320,8 +342,10 @@ fn start_path(pixel: vec2<u32>, pixel_index: u32, sample_index: u32) -> PathStat
     // so every sample weighs the same): box, a uniform point in the pixel; tent, a point around
     // its centre from the tent's density. Row 0 is the top of the image.
     var jitter = vec2<f32>(rand(), rand());
-    if params.filter_radius > 0.0 {
-        jitter = vec2<f32>(0.5) + params.filter_radius * vec2<f32>(tent(jitter.x), tent(jitter.y));
+    if params.filter_kind == FILTER_TENT {
+        jitter = vec2<f32>(0.5) + params.filter_width * vec2<f32>(tent(jitter.x), tent(jitter.y));
+    } else if params.filter_kind == FILTER_GAUSSIAN {
+        jitter = vec2<f32>(0.5) + params.filter_width * vec2<f32>(windowed_normal(jitter.x), windowed_normal(jitter.y));
     }
     let fx = (f32(pixel.x) + jitter.x) / f32(params.width);
     let fy = (f32(pixel.y) + jitter.y) / f32(params.height);

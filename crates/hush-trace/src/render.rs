@@ -110,8 +110,9 @@ struct Params {
     max_depth: u32,
     tri_count: u32,
     light_count: u32,
-    filter_radius: f32,
-    pad: [u32; 2],
+    filter_kind: u32,
+    filter_width: f32,
+    pad: [u32; 1],
 }
 
 /// Compiled kernels on one device: the generic kernel and the specialized ones rendered so far,
@@ -381,11 +382,17 @@ impl<'a> Renderer<'a> {
             max_depth: scene.max_depth,
             tri_count: flat.tris.len() as u32,
             light_count: flat.lights.len() as u32,
-            filter_radius: match scene.film.filter {
+            filter_kind: match scene.film.filter {
+                PixelFilter::Box => 0,
+                PixelFilter::Tent { .. } => 1,
+                PixelFilter::Gaussian { .. } => 2,
+            },
+            filter_width: match scene.film.filter {
                 PixelFilter::Box => 0.0,
                 PixelFilter::Tent { radius } => radius,
+                PixelFilter::Gaussian { stddev } => stddev,
             },
-            pad: [0; 2],
+            pad: [0; 1],
         };
         let paths_per_dispatch = if time_limit.is_some() { PATHS_PER_TIMED_DISPATCH } else { PATHS_PER_DISPATCH };
         let per_dispatch = (paths_per_dispatch / pixels).clamp(1, MAX_SAMPLES_PER_DISPATCH) as u32;

@@ -42,11 +42,12 @@ fn unsupported_elements_are_named_warnings() {
     let xml = r#"<scene version="3.0.0"><sensor type="perspective"><float name="fov" value="40"/>
       <transform name="to_world"><lookat origin="0,0,4" target="0,0,0"/></transform>
       <sampler type="stratified"/>
-      <film type="hdrfilm"><rfilter type="gaussian"/></film></sensor><shape type="cube"/></scene>"#;
+      <film type="hdrfilm"><rfilter type="lanczos"/></film></sensor><shape type="cube"/></scene>"#;
     let w = load_xml(&dir, xml).warnings;
-    assert_warned(&w, &["scene.xml:4:", "gaussian", "box filter"]);
+    assert_warned(&w, &["scene.xml:4:", "lanczos", "box filter"]);
     assert_warned(&w, &["scene.xml:3:", "stratified", "independently"]);
-    // A tent takes its radius (Mitsuba's default 1); a radius that is no size is an error on its line.
+    // A tent takes its radius (Mitsuba's default 1), a gaussian its stddev (0.5), and a film without a
+    // filter gets Mitsuba's, the gaussian; a width that is no size is an error on its line.
     let tent = |inner: &str| {
         format!(
             r#"<scene version="3.0.0"><sensor type="perspective"><float name="fov" value="40"/>
@@ -55,8 +56,13 @@ fn unsupported_elements_are_named_warnings() {
         )
     };
     assert_eq!(load_xml(&dir, &tent("")).film.filter, hush_scene::PixelFilter::Tent { radius: 1.0 });
-    let unfiltered = tent("").replace(r#"<rfilter type="tent"></rfilter>"#, "");
-    assert_warned(&load_xml(&dir, &unfiltered).warnings, &["scene.xml:2:", "no <rfilter>", "gaussian", "box filter"]);
+    let unfiltered = load_xml(&dir, &tent("").replace(r#"<rfilter type="tent"></rfilter>"#, ""));
+    assert_eq!(unfiltered.film.filter, hush_scene::PixelFilter::Gaussian { stddev: 0.5 });
+    assert!(!unfiltered.warnings.iter().any(|w| w.contains("filter")), "{:?}", unfiltered.warnings);
+    let gaussian = tent(r#"<float name="stddev" value="0.3"/>"#).replace(r#"type="tent""#, r#"type="gaussian""#);
+    assert_eq!(load_xml(&dir, &gaussian).film.filter, hush_scene::PixelFilter::Gaussian { stddev: 0.3 });
+    let err = load_err(&dir, &gaussian.replace("0.3", "-1"));
+    assert!(err.contains("scene.xml:3:") && err.contains("stddev -1"), "{err}");
     let wide = load_xml(&dir, &tent(r#"<float name="radius" value="1.5"/>"#));
     assert_eq!(wide.film.filter, hush_scene::PixelFilter::Tent { radius: 1.5 });
     let err = load_err(&dir, &tent(r#"<float name="radius" value="0"/>"#));

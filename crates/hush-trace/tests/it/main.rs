@@ -464,19 +464,33 @@ fn vertex_normals_choose_the_front_side() {
     assert!(out.color.mean()[0] > 0.01, "the floor should be lit: mean {:?}", out.color.mean());
 }
 
-/// The tent filter against its closed form: the camera sees an emitter of radiance 1 over the right
-/// half of the image, its edge on the border between columns 7 and 8 of 16. A tent of radius 1
-/// (Mitsuba's default) centred half a pixel from the edge covers it with 1/8 of its mass, so the
-/// columns read 0, 1/8, 7/8, 1 around the edge, where the box filter gives 0, 0, 1, 1. Each column
-/// mean holds 4 × 4096 samples, each 0 or 1: its standard error is at most 0.004 (p = 1/2), and the
-/// tolerance is 0.02, 5 of those; a radius of 2 would read 0.28 beside the edge.
+/// The pixel filters against their closed forms: the camera sees an emitter of radiance 1 over the
+/// right half of the image, its edge on the border between columns 7 and 8 of 16, so column c reads
+/// the filter's mass beyond the edge, P(X > 7.5 − c) for the filter's density X. A tent of radius 1
+/// (Mitsuba's default) gives 0, 1/8, 7/8, 1 for columns 6 to 9; the box 0, 0, 1, 1; Mitsuba's
+/// windowed Gaussian (σ = 0.5, cut at 2, the filter of a Mitsuba film that names none) what a numerical
+/// integral of its formula gives (0.0013, 0.1586, 0.8414, 0.9987). Each column mean holds 4 × 4096
+/// samples, each 0 or 1: its standard error is at most 0.004 (p = 1/2), and the tolerance is 0.02, 5 of
+/// those; a tent of radius 2 would read 0.28 beside the edge.
 #[test]
-fn tent_filter_matches_its_closed_form() {
-    let dir = std::env::temp_dir().join(format!("hush-tent-{}", std::process::id()));
+fn pixel_filters_match_their_closed_forms() {
+    let dir = std::env::temp_dir().join(format!("hush-filters-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    for (filter, expect) in
-        [("<rfilter type=\"tent\"/>", [0.0, 0.125, 0.875, 1.0]), ("<rfilter type=\"box\"/>", [0.0, 0.0, 1.0, 1.0])]
-    {
+    // Mitsuba's gaussian: max(0, exp(-x²/2σ²) - exp(-8)) on |x| <= 4σ; its mass beyond a, by the midpoint rule.
+    let gaussian_beyond = |a: f64| {
+        let g = |x: f64| ((-x * x / (2.0 * 0.25)).exp() - (-8.0f64).exp()).max(0.0);
+        let n = 200_000;
+        let mass = |lo: f64, hi: f64| {
+            (0..n).map(|i| g(lo + (i as f64 + 0.5) * (hi - lo) / n as f64)).sum::<f64>() * (hi - lo) / n as f64
+        };
+        (mass(a.max(-2.0), 2.0) / mass(-2.0, 2.0)) as f32
+    };
+    let gaussian = [1.5, 0.5, -0.5, -1.5].map(gaussian_beyond);
+    for (filter, expect) in [
+        ("<rfilter type=\"tent\"/>", [0.0, 0.125, 0.875, 1.0]),
+        ("<rfilter type=\"box\"/>", [0.0, 0.0, 1.0, 1.0]),
+        ("", gaussian),
+    ] {
         let xml = format!(
             r#"<scene version="3.0.0">
   <integrator type="path"><integer name="max_depth" value="1"/></integrator>
@@ -497,7 +511,8 @@ fn tent_filter_matches_its_closed_form() {
         for (k, want) in expect.iter().enumerate() {
             let column = 6 + k;
             let mean = (0..4).map(|y| out.color.data[(y * 16 + column) * 3]).sum::<f32>() / 4.0;
-            assert!((mean - want).abs() <= 0.02, "{filter}: column {column} reads {mean}, expected {want}");
+            let name = if filter.is_empty() { "no rfilter (gaussian)" } else { filter };
+            assert!((mean - want).abs() <= 0.02, "{name}: column {column} reads {mean}, expected {want}");
         }
     }
     std::fs::remove_dir_all(&dir).unwrap();
