@@ -610,37 +610,31 @@ impl Parser<'_, '_> {
     fn rfilter(&mut self, node: Node) -> Result<PixelFilter, SceneError> {
         match self.attr(node, "type")?.as_str() {
             "box" => Ok(PixelFilter::Box),
-            "tent" => {
-                let mut radius = 1.0;
-                for child in elements(node) {
-                    match (self.tag(child), self.name(child).as_deref()) {
-                        ("float", Some("radius")) => radius = self.float(child)?,
-                        _ => self.ignored(child, "<rfilter type=\"tent\">"),
-                    }
-                }
-                if !(radius.is_finite() && radius > 0.0 && radius <= 16.0) {
-                    return Err(self.err(node, format!("tent filter radius {radius} is not in (0, 16] pixels")));
-                }
-                Ok(PixelFilter::Tent { radius })
-            }
+            "tent" => Ok(PixelFilter::Tent { radius: self.filter_width(node, "tent", "radius", 1.0, 16.0)? }),
             "gaussian" => {
-                let mut stddev = 0.5;
-                for child in elements(node) {
-                    match (self.tag(child), self.name(child).as_deref()) {
-                        ("float", Some("stddev")) => stddev = self.float(child)?,
-                        _ => self.ignored(child, "<rfilter type=\"gaussian\">"),
-                    }
-                }
-                if !(stddev.is_finite() && stddev > 0.0 && stddev <= 4.0) {
-                    return Err(self.err(node, format!("gaussian filter stddev {stddev} is not in (0, 4] pixels")));
-                }
-                Ok(PixelFilter::Gaussian { stddev })
+                Ok(PixelFilter::Gaussian { stddev: self.filter_width(node, "gaussian", "stddev", 0.5, 4.0)? })
             }
             f => {
                 self.warn(node, format!("reconstruction filter '{f}' is not supported yet: hush uses a box filter"));
                 Ok(PixelFilter::Box)
             }
         }
+    }
+
+    /// The one `<float>` a filter `kind` takes, `name`, in (0, `max`] pixels (`default` when absent).
+    fn filter_width(&mut self, node: Node, kind: &str, name: &str, default: f32, max: f32) -> Result<f32, SceneError> {
+        let mut width = default;
+        for child in elements(node) {
+            if self.tag(child) == "float" && self.name(child).as_deref() == Some(name) {
+                width = self.float(child)?;
+            } else {
+                self.ignored(child, &format!("<rfilter type=\"{kind}\">"));
+            }
+        }
+        if !(width.is_finite() && width > 0.0 && width <= max) {
+            return Err(self.err(node, format!("{kind} filter {name} {width} is not in (0, {max}] pixels")));
+        }
+        Ok(width)
     }
 
     fn film(&mut self, node: Node) -> Result<Film, SceneError> {
