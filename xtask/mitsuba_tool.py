@@ -81,9 +81,10 @@ def integrator_max_depth(path):
 
 def load_scene(mi, path, width=None, height=None, max_depth=None):
     """The scene file as hush renders it with `--width`, `--height` and `--max-depth`: those set on the
-    film and on a `path` integrator (the scene's own integrator, e.g. a path guider, is replaced), the
-    reconstruction filter set to hush's box, and film options Mitsuba 3 no longer has (Mitsuba 0.6's
-    `highQualityEdges`) dropped. Returns the scene and the list of edits made (none without overrides)."""
+    film and on a `path` integrator (the scene's own integrator, e.g. a path guider, is replaced), a
+    reconstruction filter hush lacks (not box, tent or gaussian) set to the box hush uses for it, and film
+    options Mitsuba 3 no longer has (Mitsuba 0.6's `highQualityEdges`) dropped. Returns the scene and the
+    list of edits made (none without overrides)."""
     if width is None and height is None and max_depth is None:
         return mi.load_file(path), []
     import xml.etree.ElementTree as ET

@@ -4,8 +4,9 @@
 //! Each scene is rendered from its own file by both renderers at the same size, max_depth 8 and
 //! spp, chosen per scene (`SCENES`; `--spp N` sets every scene's) so the default run takes
 //! minutes: hush (specialized kernel, then `--generic`) and Mitsuba 3 (`llvm_ad_rgb`, 2 threads).
-//! Mitsuba gets the size and depth the way hush's flags set them, with hush's box filter and the
-//! `path` integrator (`load_scene` in `xtask/mitsuba_tool.py`, which lists its edits in the JSON).
+//! Mitsuba gets the size and depth the way hush's flags set them, the `path` integrator, and a box
+//! in place of a pixel filter hush lacks (box, tent and gaussian are kept): `load_scene` in
+//! `xtask/mitsuba_tool.py`, which lists its edits in the JSON.
 //! Reported per renderer: M paths (= samples) per CPU-second and, where an independent reference
 //! exists (the box: Mitsuba's 1792-spp render in `../shared/reference/mitsuba-cbox`),
 //! relMSE × CPU-seconds. CPU-seconds count every thread of the process: hush's from its own stats

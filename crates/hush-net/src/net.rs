@@ -165,9 +165,11 @@ impl Net {
     /// records no graph, so a training run's evaluation frees each activation once the next layer
     /// has used it instead of keeping them all for a backward pass that never comes.
     pub fn frozen(&self) -> Result<Net> {
-        let tensors = self.named_tensors().into_iter().map(|(name, t)| (name, t.detach())).collect();
+        let named = self.named_tensors();
+        let dtype = named.first().map_or(candle_core::DType::F32, |(_, t)| t.dtype());
+        let tensors = named.into_iter().map(|(name, t)| (name, t.detach())).collect();
         let device = self.device().clone();
-        Net::new(VarBuilder::from_tensors(tensors, candle_core::DType::F32, &device), &self.config())
+        Net::new(VarBuilder::from_tensors(tensors, dtype, &device), &self.config())
     }
 
     pub fn config(&self) -> NetConfig {

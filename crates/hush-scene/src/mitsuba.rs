@@ -15,9 +15,9 @@
 //! to snake_case as Mitsuba 2's upgrade does (an underscore between a lower-case letter and an
 //! upper-case one, then lower case).
 //!
-//! Policy: what hush does not support yet (another integrator, a tent filter, a Beckmann
-//! distribution, an opacity mask, a point light, a missing mesh or texture file, ...) is a
-//! warning in [`Scene::warnings`] naming the element, its line and what was used instead.
+//! Policy: what hush does not support yet (another integrator, a Lanczos filter, an opacity mask,
+//! a point light, a missing mesh or texture file, ...) is a warning in [`Scene::warnings`] naming
+//! the element, its line and what was used instead.
 //! Malformed input (not XML, a number that is not one, a missing required attribute, an
 //! undefined `$variable`, an undefined `ref`, NaN vertices, a zero-area emitter) is an error
 //! naming the file and the line.
@@ -609,7 +609,12 @@ impl Parser<'_, '_> {
     /// `stddev` (0.5); any other is a warning and a box.
     fn rfilter(&mut self, node: Node) -> Result<PixelFilter, SceneError> {
         match self.attr(node, "type")?.as_str() {
-            "box" => Ok(PixelFilter::Box),
+            "box" => {
+                for child in elements(node) {
+                    self.ignored(child, "<rfilter type=\"box\">");
+                }
+                Ok(PixelFilter::Box)
+            }
             "tent" => Ok(PixelFilter::Tent { radius: self.filter_width(node, "tent", "radius", 1.0, 16.0)? }),
             "gaussian" => {
                 Ok(PixelFilter::Gaussian { stddev: self.filter_width(node, "gaussian", "stddev", 0.5, 4.0)? })
@@ -621,18 +626,26 @@ impl Parser<'_, '_> {
         }
     }
 
-    /// The one `<float>` a filter `kind` takes, `name`, in (0, `max`] pixels (`default` when absent).
+    /// The one `<float>` a filter `kind` takes, `name` (`default` when absent): positive, and at most
+    /// `max` pixels (a wider one is a warning and `max`).
     fn filter_width(&mut self, node: Node, kind: &str, name: &str, default: f32, max: f32) -> Result<f32, SceneError> {
         let mut width = default;
         for child in elements(node) {
             if self.tag(child) == "float" && self.name(child).as_deref() == Some(name) {
                 width = self.float(child)?;
+                if !(width.is_finite() && width > 0.0) {
+                    return Err(self.err(child, format!("{kind} filter {name} {width} is not a positive width")));
+                }
+                if width > max {
+                    self.warn(
+                        child,
+                        format!("{kind} filter {name} {width} is wider than hush supports: hush uses {max}"),
+                    );
+                    width = max;
+                }
             } else {
                 self.ignored(child, &format!("<rfilter type=\"{kind}\">"));
             }
-        }
-        if !(width.is_finite() && width > 0.0 && width <= max) {
-            return Err(self.err(node, format!("{kind} filter {name} {width} is not in (0, {max}] pixels")));
         }
         Ok(width)
     }
@@ -643,6 +656,7 @@ impl Parser<'_, '_> {
             self.warn(node, format!("film '{ty}' is not supported: hush writes an HDR OpenEXR film"));
         }
         let mut film = Film { width: DEFAULT_WIDTH, height: DEFAULT_HEIGHT, filter: PixelFilter::MITSUBA_DEFAULT };
+        let mut has_filter = false;
         for child in elements(node) {
             match (self.tag(child), self.name(child).as_deref()) {
                 ("integer", Some(dim @ ("width" | "height"))) => {
@@ -652,7 +666,13 @@ impl Parser<'_, '_> {
                     }
                     if dim == "width" { film.width = v as u32 } else { film.height = v as u32 }
                 }
-                ("rfilter", _) => film.filter = self.rfilter(child)?,
+                ("rfilter", _) if has_filter => {
+                    return Err(self.err(child, "a film can only have one reconstruction filter (<rfilter>)"));
+                }
+                ("rfilter", _) => {
+                    film.filter = self.rfilter(child)?;
+                    has_filter = true;
+                }
                 // Output encodings: hush always writes float RGB OpenEXR, without a banner.
                 ("string", Some("file_format" | "pixel_format" | "component_format")) | ("boolean", Some("banner")) => {
                     self.string(child)?;

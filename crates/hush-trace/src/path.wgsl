@@ -321,7 +321,7 @@ fn tent(u: f32) -> f32 {
 
 // A sample in units of σ from Mitsuba's windowed Gaussian, density ∝ max(0, exp(−x²/2) − exp(−8))
 // on [−4, 4], by rejection: a normal from u and a second number (Box–Muller), redrawn until it
-// lies in the window, kept with probability (exp(−x²/2) − exp(−8)) / exp(−x²/2) (about 99.97 %).
+// lies in the window, kept with probability (exp(−x²/2) − exp(−8)) / exp(−x²/2) (99.9 % on average).
 fn windowed_normal(u: f32) -> f32 {
     var a = u;
     var x = 0.0;
@@ -335,20 +335,40 @@ fn windowed_normal(u: f32) -> f32 {
     return x;
 }
 
+// A position along one image axis (in pixels) for pixel `pixel` of `size`, drawn in proportion to
+// the pixel filter from u and, where needed, more random numbers (filter importance sampling: every
+// sample weighs the same). Box: uniform in the pixel. Tent and gaussian: around the pixel's centre,
+// redrawn while outside the image, which truncates the filter at the image's border as Mitsuba's
+// film does (it takes no samples beyond its border and normalizes each pixel by the weight inside).
+fn filter_position(u: f32, pixel: u32, size: u32) -> f32 {
+    if params.filter_kind == FILTER_BOX {
+        return f32(pixel) + u;
+    }
+    var a = u;
+    var x = 0.0;
+    loop {
+        var offset = 0.0;
+        if params.filter_kind == FILTER_TENT {
+            offset = tent(a);
+        } else {
+            offset = windowed_normal(a);
+        }
+        x = f32(pixel) + 0.5 + params.filter_width * offset;
+        if x >= 0.0 && x < f32(size) {
+            break;
+        }
+        a = rand();
+    }
+    return x;
+}
+
 // Seeds the random stream of (pixel, sample index, seed) and starts that sample's camera ray.
 fn start_path(pixel: vec2<u32>, pixel_index: u32, sample_index: u32) -> PathState {
     rng_state = pcg(pixel_index ^ pcg(sample_index ^ pcg(params.seed_lo ^ pcg(params.seed_hi))));
-    // A point in the pixel's filter, drawn in proportion to the filter (filter importance sampling,
-    // so every sample weighs the same): box, a uniform point in the pixel; tent, a point around
-    // its centre from the tent's density. Row 0 is the top of the image.
-    var jitter = vec2<f32>(rand(), rand());
-    if params.filter_kind == FILTER_TENT {
-        jitter = vec2<f32>(0.5) + params.filter_width * vec2<f32>(tent(jitter.x), tent(jitter.y));
-    } else if params.filter_kind == FILTER_GAUSSIAN {
-        jitter = vec2<f32>(0.5) + params.filter_width * vec2<f32>(windowed_normal(jitter.x), windowed_normal(jitter.y));
-    }
-    let fx = (f32(pixel.x) + jitter.x) / f32(params.width);
-    let fy = (f32(pixel.y) + jitter.y) / f32(params.height);
+    // A point drawn from the pixel's filter, separably. Row 0 is the top of the image.
+    let u = vec2<f32>(rand(), rand());
+    let fx = filter_position(u.x, pixel.x, params.width) / f32(params.width);
+    let fy = filter_position(u.y, pixel.y, params.height) / f32(params.height);
     let d = normalize(params.forward.xyz + (2.0 * fx - 1.0) * params.right.xyz + (1.0 - 2.0 * fy) * params.up.xyz);
     let zero = vec3<f32>(0.0);
     return PathState(params.origin.xyz, d, vec3<f32>(1.0), 0.0, true, false, 0u, Sample(zero, zero, zero, zero, zero));

@@ -62,11 +62,16 @@ fn unsupported_elements_are_named_warnings() {
     let gaussian = tent(r#"<float name="stddev" value="0.3"/>"#).replace(r#"type="tent""#, r#"type="gaussian""#);
     assert_eq!(load_xml(&dir, &gaussian).film.filter, hush_scene::PixelFilter::Gaussian { stddev: 0.3 });
     let err = load_err(&dir, &gaussian.replace("0.3", "-1"));
-    assert!(err.contains("scene.xml:3:") && err.contains("stddev -1"), "{err}");
+    assert!(err.contains("scene.xml:3:") && err.contains("stddev -1") && err.contains("positive"), "{err}");
     let wide = load_xml(&dir, &tent(r#"<float name="radius" value="1.5"/>"#));
     assert_eq!(wide.film.filter, hush_scene::PixelFilter::Tent { radius: 1.5 });
-    let err = load_err(&dir, &tent(r#"<float name="radius" value="0"/>"#));
-    assert!(err.contains("scene.xml:3:") && err.contains("radius 0"), "{err}");
+    let err = load_err(&dir, &tent("\n<float name=\"radius\" value=\"0\"/>"));
+    assert!(err.contains("scene.xml:4:") && err.contains("radius 0"), "{err}");
+    let wide = load_xml(&dir, &tent(r#"<float name="radius" value="40"/>"#));
+    assert_eq!(wide.film.filter, hush_scene::PixelFilter::Tent { radius: 16.0 });
+    assert_warned(&wide.warnings, &["scene.xml:3:", "radius 40", "hush uses 16"]);
+    let err = load_err(&dir, &tent("").replace("</film>", "<rfilter type=\"box\"/></film>"));
+    assert!(err.contains("scene.xml:3:") && err.contains("one reconstruction filter"), "{err}");
 }
 
 #[test]

@@ -472,6 +472,11 @@ fn vertex_normals_choose_the_front_side() {
 /// integral of its formula gives (0.0013, 0.1586, 0.8414, 0.9987). Each column mean holds 4 × 4096
 /// samples, each 0 or 1: its standard error is at most 0.004 (p = 1/2), and the tolerance is 0.02, 5 of
 /// those; a tent of radius 2 would read 0.28 beside the edge.
+///
+/// At the image's border the filter is cut off and renormalized, as Mitsuba's film does (it takes no
+/// samples beyond its border): with the edge between columns 14 and 15 and a tent of radius 2, the
+/// last column reads P(−0.5 < X < 0.5) / P(X < 0.5) = 0.609 (0.719 uncut) and column 14
+/// P(0.5 < X < 1.5) / P(X < 1.5) = 0.258.
 #[test]
 fn pixel_filters_match_their_closed_forms() {
     let dir = std::env::temp_dir().join(format!("hush-filters-{}", std::process::id()));
@@ -486,11 +491,17 @@ fn pixel_filters_match_their_closed_forms() {
         (mass(a.max(-2.0), 2.0) / mass(-2.0, 2.0)) as f32
     };
     let gaussian = [1.5, 0.5, -0.5, -1.5].map(gaussian_beyond);
-    for (filter, expect) in [
-        ("<rfilter type=\"tent\"/>", [0.0, 0.125, 0.875, 1.0]),
-        ("<rfilter type=\"box\"/>", [0.0, 0.0, 1.0, 1.0]),
-        ("", gaussian),
+    // The tent of radius 2: its distribution function.
+    let tent2 = |x: f32| if x <= 0.0 { (2.0 + x).powi(2) / 8.0 } else { 1.0 - (2.0 - x).powi(2) / 8.0 };
+    let cut = [(tent2(1.5) - tent2(0.5)) / tent2(1.5), (tent2(0.5) - tent2(-0.5)) / tent2(0.5)];
+    for (filter, edge_column, expect) in [
+        ("<rfilter type=\"tent\"/>", 8, vec![0.0, 0.125, 0.875, 1.0]),
+        ("<rfilter type=\"box\"/>", 8, vec![0.0, 0.0, 1.0, 1.0]),
+        ("", 8, gaussian.to_vec()),
+        ("<rfilter type=\"tent\"><float name=\"radius\" value=\"2\"/></rfilter>", 15, cut.to_vec()),
     ] {
+        // The edge's x on the plane z = -1: the image spans ±tan(30°) across its 16 columns.
+        let edge = (2.0 * edge_column as f64 / 16.0 - 1.0) * 30f64.to_radians().tan();
         let xml = format!(
             r#"<scene version="3.0.0">
   <integrator type="path"><integer name="max_depth" value="1"/></integrator>
@@ -500,16 +511,17 @@ fn pixel_filters_match_their_closed_forms() {
     <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="4"/>{filter}</film>
   </sensor>
   <shape type="rectangle">
-    <transform name="to_world"><scale x="10" y="10"/><translate x="10" z="-1"/></transform>
+    <transform name="to_world"><scale x="10" y="10"/><translate x="{}" z="-1"/></transform>
     <emitter type="area"><rgb name="radiance" value="1, 1, 1"/></emitter>
   </shape>
-</scene>"#
+</scene>"#,
+            edge + 10.0
         );
         std::fs::write(dir.join("scene.xml"), xml).unwrap();
         let scene = Scene::load(&dir.join("scene.xml")).unwrap();
         let out = render(&scene, 4096, 9);
         for (k, want) in expect.iter().enumerate() {
-            let column = 6 + k;
+            let column = edge_column + k - expect.len() / 2;
             let mean = (0..4).map(|y| out.color.data[(y * 16 + column) * 3]).sum::<f32>() / 4.0;
             let name = if filter.is_empty() { "no rfilter (gaussian)" } else { filter };
             assert!((mean - want).abs() <= 0.02, "{name}: column {column} reads {mean}, expected {want}");
