@@ -10,7 +10,8 @@
 //! Reported per renderer: M paths (= samples) per CPU-second and, where an independent reference
 //! exists (the box: Mitsuba's 1792-spp render in `../shared/reference/mitsuba-cbox`),
 //! relMSE × CPU-seconds. CPU-seconds count every thread of the process: hush's from its own stats
-//! (after the scene load and the GPU set-up, with the upload and BVH build), Mitsuba's from
+//! (after the scene load and the GPU set-up, with the upload and BVH build; each kernel comes from
+//! the driver's shader cache, which a 1-spp 8×8 render of the scene fills first), Mitsuba's from
 //! getrusage around a second render whose kernels come from Dr.Jit's cache (see
 //! `xtask/mitsuba_tool.py`; its scene load and BVH build are not counted). relMSE is computed by
 //! Python in Mitsuba's venv (xtask reads no EXR). Without Mitsuba the hush half still runs and
@@ -135,6 +136,23 @@ fn render(args: &[String]) -> Result<()> {
             if generic {
                 cmd.arg("--generic");
             }
+            // Compile the kernel once untimed, as Mitsuba's timed render reuses its JIT's kernels.
+            let mut warm = Command::new(&hush);
+            warm.arg("render").arg(&scene).args([
+                "--spp",
+                "1",
+                "--width",
+                "8",
+                "--height",
+                "8",
+                "--max-depth",
+                &size[2],
+            ]);
+            warm.arg("--out").arg(dir.join(format!("warm-up-{}-{kind}.exr", sc.name)));
+            if generic {
+                warm.arg("--generic");
+            }
+            spawn(&mut warm)?;
             spawn(&mut cmd)?;
             let s = read_json(&stats)?;
             hush_runs.push((

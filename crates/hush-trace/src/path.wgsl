@@ -77,6 +77,8 @@ const T_MAX: f32 = 3.0e38;
 override HAS_TEXTURES: bool = true;
 override HAS_ENV: bool = true;
 override HAS_SHADING_NORMALS: bool = true;
+// The film's filter is a tent or a gaussian (false: a box).
+override HAS_WIDE_FILTER: bool = true;
 // Few triangles: every ray tests all of them in order instead of walking the BVH.
 override FLAT_SCAN: bool = false;
 
@@ -341,7 +343,7 @@ fn windowed_normal(u: f32) -> f32 {
 // redrawn while outside the image, which truncates the filter at the image's border as Mitsuba's
 // film does (it takes no samples beyond its border and normalizes each pixel by the weight inside).
 fn filter_position(u: f32, pixel: u32, size: u32) -> f32 {
-    if params.filter_kind == FILTER_BOX {
+    if !HAS_WIDE_FILTER || params.filter_kind == FILTER_BOX {
         return f32(pixel) + u;
     }
     var a = u;

@@ -210,6 +210,7 @@ impl<'a> Renderer<'a> {
             ("HAS_BECKMANN", flag(features.beckmann)),
             ("FLAT_SCAN", flag(features.flat_scan)),
             ("HAS_SHADING_NORMALS", flag(features.shading_normals)),
+            ("HAS_WIDE_FILTER", flag(features.wide_filter)),
         ];
         let device = &self.gpu.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);

@@ -382,6 +382,8 @@ pub struct KernelFeatures {
     pub flat_scan: bool,
     /// Some mesh has vertex normals (interpolated shading normals).
     pub shading_normals: bool,
+    /// The film's pixel filter is a tent or a gaussian (sampled in a loop; the box is one draw).
+    pub wide_filter: bool,
 }
 
 /// Scenes with at most this many triangles are intersected by a flat scan: every ray tests every
@@ -405,9 +407,10 @@ impl KernelFeatures {
         beckmann: true,
         flat_scan: false,
         shading_normals: true,
+        wide_filter: true,
     };
     /// None of the optional features (diffuse, smooth and GGX-rough conductors, smooth and
-    /// thin glass, smooth plastic, triangle lights, flat face normals remain).
+    /// thin glass, smooth plastic, triangle lights, flat face normals, the box filter remain).
     pub const NONE: KernelFeatures = KernelFeatures {
         textures: false,
         environment: false,
@@ -416,6 +419,7 @@ impl KernelFeatures {
         beckmann: false,
         flat_scan: false,
         shading_normals: false,
+        wide_filter: false,
     };
 
     /// The features `scene` uses.
@@ -426,6 +430,7 @@ impl KernelFeatures {
             ..KernelFeatures::NONE
         };
         f.shading_normals = scene.meshes.iter().any(|m| m.normals.is_some());
+        f.wide_filter = scene.film.filter != hush_scene::PixelFilter::Box;
         for m in scene.meshes.iter().map(|m| &m.material) {
             f.textures |= m.texture().is_some();
             let (alpha, distribution) = match *m {
