@@ -24,7 +24,7 @@ fn scene_generate_writes_a_scene_that_loads_back() {
     assert_eq!(std::fs::read(&xml).unwrap(), std::fs::read(&again).unwrap());
 
     // A bad flag value is clap's usage error (exit code 2).
-    let out = hush(&["scene", "generate", "--out", s(&dir.join("x.xml")), "--features", "sparkles"]);
+    let out = hush(&["scene", "generate", "--out", s(&dir.join("x.xml")), "--ingredients", "sparkles"]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("sparkles") && err.contains("roughdielectric") && !err.contains("panicked"), "{err}");

@@ -41,7 +41,7 @@ tasks:
                              ready (from the f16 cache when it is intact) of `hush train` (the demo's settings)
   baselines setup            install OIDN 2.5.1, BM3D, flip-evaluator, scikit-image (PyPI) into target/baselines-venv
   baselines check            run BM3D and OIDN through hush-eval on a Cornell box crop; fail unless both help
-  procedural check [--count N] [--seed S] [--features default|basic|...]
+  procedural check [--count N] [--seed S] [--ingredients default|basic|...]
                              N procedural scenes (default 100) generate and render at 32² without
                              NaN/Inf; spread of mean luminance, material and light mix
   mitsuba setup              install Mitsuba 3 (PyPI) into target/mitsuba-venv and verify it renders

@@ -15,7 +15,7 @@ use std::time::Instant;
 use crate::util::{Result, build_hush, ensure_vulkan, read_json, release, target_dir, write_json};
 
 const USAGE: &str = "usage: cargo xtask procedural check [--count N] [--seed S] [--size PX] [--spp N] \
-                     [--features default|basic|...] [--release] [--hush PATH]";
+                     [--ingredients default|basic|...] [--release] [--hush PATH]";
 
 pub fn run(args: &[String]) -> Result<()> {
     match args.first().map(String::as_str) {
@@ -61,7 +61,7 @@ fn check(args: &[String]) -> Result<()> {
     let seed: u64 = number(args, "--seed", "0")?;
     let size: u32 = number(args, "--size", "32")?;
     let spp: u32 = number(args, "--spp", "4")?;
-    let features = flag(args, "--features", "default")?;
+    let features = flag(args, "--ingredients", "default")?;
     ensure_vulkan()?;
     let hush = match args.iter().position(|a| a == "--hush") {
         Some(i) => PathBuf::from(args.get(i + 1).ok_or_else(|| format!("--hush needs a path\n{USAGE}"))?),
@@ -79,7 +79,7 @@ fn check(args: &[String]) -> Result<()> {
         let stats = scene_dir.join("stats.json");
         let generated = quiet(
             Command::new(&hush)
-                .args(["scene", "generate", "--seed", &s.to_string(), "--features", &features, "--out"])
+                .args(["scene", "generate", "--seed", &s.to_string(), "--ingredients", &features, "--out"])
                 .arg(&xml)
                 .arg("--summary")
                 .arg(&summary),

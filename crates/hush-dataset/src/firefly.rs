@@ -3,7 +3,7 @@
 //! ImageMagick's despeckle is Crimmins' speckle-removal filter: per channel, a pixel that stands above its
 //! neighbours is lowered step by step until it no longer does, so isolated one-pixel peaks vanish while
 //! edges and areas (which have equally bright neighbours) survive. [`despeckle`] keeps that property with one
-//! robust, documented rule that works on HDR values and keeps colour:
+//! robust, documented rule that works on HDR values and keeps color:
 //!
 //! * a pixel's luminance `L` (Rec. 709) is compared with `M`, the largest luminance among its 8 neighbours
 //!   (at the border, the neighbours that exist);

@@ -122,7 +122,7 @@ impl Image {
         Ok(Image { width: first.width, height: first.height, channels, data })
     }
 
-    /// The channels in `range`, e.g. `0..3` for the colour of a stacked input.
+    /// The channels in `range`, e.g. `0..3` for the color of a stacked input.
     pub fn select_channels(&self, range: Range<usize>) -> Result<Image> {
         if range.start >= range.end || range.end > self.channels {
             return Err(Error::Shape(format!(

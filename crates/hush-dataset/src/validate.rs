@@ -20,7 +20,7 @@ pub fn check_finite(path: impl AsRef<Path>, image: &Image) -> Result<()> {
     }
 }
 
-/// What to do with negative samples in radiance (colour, diffuse, specular, reference).
+/// What to do with negative samples in radiance (color, diffuse, specular, reference).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum NegativePolicy {
     /// Fail, naming the first negative pixel. Radiance is never negative, so a negative value is a bug.

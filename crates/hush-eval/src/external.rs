@@ -8,12 +8,12 @@
 //! imports are not counted. When the venv or a package is missing the outcome is
 //! [`Outcome::Skipped`] with the install command, never an error.
 //!
-//! - **BM3D** works on the tonemapped image: `tonemap(colour, exposure_of(colour))` (the noisy image's own
+//! - **BM3D** works on the tonemapped image: `tonemap(color, exposure_of(color))` (the noisy image's own
 //!   autoexposure: no reference is used), σ chosen by [`bm3d_sigma`], and the output is mapped back to linear
 //!   by inverting that tonemap ([`inverse_tonemap`]; values that tonemap to 1 come back as the curve's white
 //!   point).
-//! - **OIDN** gets the linear HDR colour with albedo and normal when both are given (`hdr=True`, quality
-//!   `balanced`: the weights `rt_hdr_alb_nrm`), else the colour alone (`rt_hdr`).
+//! - **OIDN** gets the linear HDR color with albedo and normal when both are given (`hdr=True`, quality
+//!   `balanced`: the weights `rt_hdr_alb_nrm`), else the color alone (`rt_hdr`).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -54,7 +54,7 @@ impl Baseline {
     }
 }
 
-/// One image to denoise: linear HDR colour and optional albedo and normal of the same size.
+/// One image to denoise: linear HDR color and optional albedo and normal of the same size.
 #[derive(Clone, Copy, Debug)]
 pub struct Input<'a> {
     pub color: &'a Image,
@@ -253,11 +253,11 @@ pub fn run_baseline(baseline: Baseline, inputs: &[Input], python: &Path, repeats
 
 fn check_input(i: usize, input: &Input) -> Result<()> {
     let c = input.color;
-    for (what, image) in [("colour", Some(c)), ("albedo", input.albedo), ("normal", input.normal)] {
+    for (what, image) in [("color", Some(c)), ("albedo", input.albedo), ("normal", input.normal)] {
         let Some(image) = image else { continue };
         if image.channels != 3 || (image.width, image.height) != (c.width, c.height) || c.width == 0 || c.height == 0 {
             return Err(Error::Shape(format!(
-                "external baseline: input {i}: the {what} image is {} but the colour is {} (need RGB, same size)",
+                "external baseline: input {i}: the {what} image is {} but the color is {} (need RGB, same size)",
                 image.size_string(),
                 c.size_string()
             )));

@@ -8,7 +8,7 @@
 //! linear RGB [0, 1], convert to CIELab, apply the Hunt adjustment, take the HyAB distance, compress it
 //! (`^0.7`) and remap to [0, 1]; in parallel, detect edges and points (1st/2nd derivatives of a Gaussian of
 //! std 0.5·0.082·ppd on normalized luminance) in both images; the final per-pixel error is
-//! `colour_error ^ (1 − feature_difference)`. The mean is the plain mean of that map.
+//! `color_error ^ (1 − feature_difference)`. The mean is the plain mean of that map.
 
 // FLIP.h's `FLIP::PI` (3.14159265358979f) rounds to this same f32.
 use std::f32::consts::PI;
@@ -21,7 +21,7 @@ use crate::{Error, Result};
 /// monitor watched from 0.7 m: `0.7 · 3840 / 0.7 · π / 180` ≈ 67.02.
 pub const DEFAULT_PPD: f32 = 0.7 * (3840.0 / 0.7) * (PI / 180.0);
 
-// FLIP's constants (FLIP.h `FLIPConstants`): colour-difference exponent, cut-off fraction and its target,
+// FLIP's constants (FLIP.h `FLIPConstants`): color-difference exponent, cut-off fraction and its target,
 // feature filter width in degrees, feature exponent.
 const GQC: f32 = 0.7;
 const GPC: f32 = 0.4;
@@ -75,9 +75,9 @@ pub fn flip_with_ppd(test: &Image, reference: &Image, ppd: f32) -> Result<Flip> 
     let (w, h) = (reference.width, reference.height);
     let r = to_ycxcz(reference);
     let t = to_ycxcz(test);
-    let colour = colour_difference(&r, &t, w, h, ppd);
+    let color = color_difference(&r, &t, w, h, ppd);
     let features = feature_difference(&r, &t, w, h, ppd);
-    let data: Vec<f32> = colour.iter().zip(&features).map(|(&c, &f)| c.powf(1.0 - f)).collect();
+    let data: Vec<f32> = color.iter().zip(&features).map(|(&c, &f)| c.powf(1.0 - f)).collect();
     let mean = data.iter().map(|&v| f64::from(v)).sum::<f64>() / data.len() as f64;
     Ok(Flip { map: Image { width: w, height: h, channels: 1, data }, mean })
 }
@@ -195,8 +195,8 @@ fn spatial_filters(ppd: f32) -> (Vec<[f32; 2]>, Vec<[f32; 2]>) {
     (ycx, cz)
 }
 
-/// Per-pixel colour error after CSF filtering, remapped to [0, 1].
-fn colour_difference(r: &[C3], t: &[C3], w: usize, h: usize, ppd: f32) -> Vec<f32> {
+/// Per-pixel color error after CSF filtering, remapped to [0, 1].
+fn color_difference(r: &[C3], t: &[C3], w: usize, h: usize, ppd: f32) -> Vec<f32> {
     let (fy, fz) = spatial_filters(ppd);
     let half = (fy.len() / 2) as i64;
     let cmax = {

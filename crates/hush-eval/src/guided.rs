@@ -1,21 +1,21 @@
 //! A hand-coded, feature-guided denoiser (the thesis's "hand-coded algorithms", §3.2): a cross-bilateral
-//! filter on the colour whose weights come from pixel distance, albedo and normal differences, and colour
+//! filter on the color whose weights come from pixel distance, albedo and normal differences, and color
 //! differences measured against the image's own noise level.
 //!
 //! Algorithm, for each pixel p over a (2r+1)² window of pixels q:
-//! 1. Demodulate: `irr = colour / max(albedo, 0.01)` per channel (texture is restored in step 4, so the filter
-//!    only has to smooth lighting); without an albedo, `irr = colour`.
+//! 1. Demodulate: `irr = color / max(albedo, 0.01)` per channel (texture is restored in step 4, so the filter
+//!    only has to smooth lighting); without an albedo, `irr = color`.
 //! 2. Weight `w(p, q) = exp(−|p−q|² / 2σ_s²) · exp(−|a_p−a_q|² / 2σ_a²) · exp(−|n_p−n_q|² / 2σ_n²)
 //!    · exp(−(g_p−g_q)² / 2σ_c²)`, where `g = log(1 + mean(irr))` (compressed, so fireflies do not dominate) and
 //!    `σ_c = color_k · σ_noise`, `σ_noise` the robust noise estimate of `g` ([`noise_sigma_mad`]).
 //! 3. `irr'_p = irr_p + Σ w (irr_q − irr_p) / Σ w` (written as a correction, so a constant image is returned
 //!    bit for bit).
-//! 4. Remodulate: `out = colour_p + max(albedo_p, 0.01) · (irr'_p − irr_p)`.
+//! 4. Remodulate: `out = color_p + max(albedo_p, 0.01) · (irr'_p − irr_p)`.
 //!
 //! Parameters ([`GuidedParams::default`]: r 7, σ_s 4, σ_a 0.05, σ_n 0.1, color_k 8) were chosen once by hand
 //! on the Mitsuba Cornell box at 16 spp with its albedo and normal (`shared/reference/oidn-2.5.1`), scored
 //! against its 1792-spp render: PSNR 25.6 → 36.1 dB, SSIM 0.52 → 0.964, FLIP 0.046 (OIDN 2.5.1: 40.6 dB).
-//! A larger window blurs soft shadows (r 10: −0.6 dB); a tighter colour term (color_k 2) keeps noise
+//! A larger window blurs soft shadows (r 10: −0.6 dB); a tighter color term (color_k 2) keeps noise
 //! (−2.7 dB), a looser one (16) changes little: albedo and normal carry the edges. σ_a and σ_n make the
 //! weight across a material or geometric edge negligible (the test scene's albedo edge: exp(−130)). No
 //! parameter depends on a reference image at run time.
@@ -57,7 +57,7 @@ pub fn guided_filter(
     normal: Option<&Image>,
     params: &GuidedParams,
 ) -> Result<Image> {
-    check_input("colour", color, color)?;
+    check_input("color", color, color)?;
     if let Some(a) = albedo {
         check_input("albedo", a, color)?;
     }
@@ -196,7 +196,7 @@ fn check_input(what: &str, image: &Image, color: &Image) -> Result<()> {
     }
     if (image.width, image.height) != (color.width, color.height) {
         return Err(Error::Shape(format!(
-            "guided filter: the {what} image is {} but the colour is {}",
+            "guided filter: the {what} image is {} but the color is {}",
             image.size_string(),
             color.size_string()
         )));

@@ -106,9 +106,9 @@ pub fn to_html(report: &Report, dir: &Path) -> Result<String> {
             escape_html(&caption)
         );
     }
-    h.push_str("<table><tr><th>colour</th><th>method</th></tr>");
+    h.push_str("<table><tr><th>color</th><th>method</th></tr>");
     for (i, m) in methods.iter().enumerate() {
-        let (r, g, b) = crate::plot::colour(i);
+        let (r, g, b) = crate::plot::series_color(i);
         let _ = write!(
             h,
             "<tr><td><span class=swatch style=\"background:#{r:02x}{g:02x}{b:02x}\"></span></td><td>{}</td></tr>",

@@ -43,7 +43,7 @@ pub use error::{Error, Result};
 pub use metrics::{
     MS_SSIM_MIN_SIDE, Metrics, compare, mae, ms_ssim_tonemapped, mse, psnr, psnr_of_mse, rel_mse, ssim, ssim_tonemapped,
 };
-pub use plot::{colour, plot_error_vs_time};
+pub use plot::{plot_error_vs_time, series_color};
 pub use report::{CONVENTIONS, Figure, FigureImage, NOISY, REFERENCE, Report, Row, SCHEMA, Skipped, Table};
 pub use timing::{Timing, time_median};
 pub use tonemap::{exposure_of, filmic, tonemap};

@@ -8,7 +8,7 @@
 //! ```
 //!
 //! Same settings as the Python runner (`external`): filter `RT`, `hdr`, quality `balanced`, albedo and
-//! normal when both are given (weights `rt_hdr_alb_nrm`), else colour only (`rt_hdr`).
+//! normal when both are given (weights `rt_hdr_alb_nrm`), else color only (`rt_hdr`).
 
 use hush_dataset::{Image, check_finite};
 
@@ -18,11 +18,11 @@ use crate::{Error, Result};
 /// warm-up. Returns the output and the median seconds of the timed runs. Errors name the bad input or carry
 /// OIDN's message.
 pub fn denoise(color: &Image, albedo: Option<&Image>, normal: Option<&Image>, repeats: usize) -> Result<(Image, f64)> {
-    for (what, image) in [("colour", Some(color)), ("albedo", albedo), ("normal", normal)] {
+    for (what, image) in [("color", Some(color)), ("albedo", albedo), ("normal", normal)] {
         let Some(image) = image else { continue };
         if image.channels != 3 || (image.width, image.height) != (color.width, color.height) {
             return Err(Error::Shape(format!(
-                "OIDN: the {what} image is {} but the colour is {} (need RGB, same size)",
+                "OIDN: the {what} image is {} but the color is {} (need RGB, same size)",
                 image.size_string(),
                 color.size_string()
             )));

@@ -4,7 +4,7 @@
 //!
 //! "Off by" is measured on the evaluation tonemap ([`crate::tonemap`] with the reference's exposure): the
 //! largest absolute difference over the pixel's channels, in [0, 1]. Pixels above [`MARK_HIGH`] are drawn
-//! in [`HIGH_COLOUR`] (red), above [`MARK_LOW`] in [`LOW_COLOUR`] (yellow), the others as the reference in
+//! in [`HIGH_COLOR`] (red), above [`MARK_LOW`] in [`LOW_COLOR`] (yellow), the others as the reference in
 //! dimmed grey.
 
 use hush_dataset::Image;
@@ -16,10 +16,10 @@ use crate::{Error, Result, tonemap};
 pub const MARK_LOW: f32 = 0.03;
 /// The upper threshold of [`error_marks`]: 10 % of the tonemapped range.
 pub const MARK_HIGH: f32 = 0.10;
-/// Colour of pixels off by more than [`MARK_LOW`] (and at most [`MARK_HIGH`]).
-pub const LOW_COLOUR: [u8; 3] = [255, 200, 0];
-/// Colour of pixels off by more than [`MARK_HIGH`].
-pub const HIGH_COLOUR: [u8; 3] = [220, 0, 0];
+/// Color of pixels off by more than [`MARK_LOW`] (and at most [`MARK_HIGH`]).
+pub const LOW_COLOR: [u8; 3] = [255, 200, 0];
+/// Color of pixels off by more than [`MARK_HIGH`].
+pub const HIGH_COLOR: [u8; 3] = [220, 0, 0];
 
 /// An 8-bit RGB picture.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -98,10 +98,10 @@ pub fn error_marks(test: &Image, reference: &Image, exposure: f32) -> Result<(Rg
         if off > MARK_HIGH {
             high += 1;
             low += 1;
-            data.extend_from_slice(&HIGH_COLOUR);
+            data.extend_from_slice(&HIGH_COLOR);
         } else if off > MARK_LOW {
             low += 1;
-            data.extend_from_slice(&LOW_COLOUR);
+            data.extend_from_slice(&LOW_COLOR);
         } else {
             let grey = to_u8(0.25 + 0.5 * (0.2126 * b[0] + 0.7152 * b[1] + 0.0722 * b[2]));
             data.extend_from_slice(&[grey; 3]);

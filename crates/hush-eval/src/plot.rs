@@ -1,6 +1,6 @@
 //! Error-against-time plots as PNG, drawn without fonts (no system font needed): log-log axes with grey
 //! grid lines at powers of ten (2..9 lighter), each power labelled `1e-2` etc. in a built-in 3×5 pixel font
-//! (seconds below, the error at the left), one colour per method (see [`colour`]; the report carries the
+//! (seconds below, the error at the left), one color per method (see [`color`]; the report carries the
 //! legend), a line per (method, view) through its points in spp order and a dot per point.
 
 use image::ImageEncoder;
@@ -9,7 +9,7 @@ use plotters::prelude::*;
 use crate::tradeoff::{ErrorMetric, curve};
 use crate::{Error, Result, Row};
 
-/// Colours of the methods in order (the noisy input usually first, in black); repeats after 8.
+/// Colors of the methods in order (the noisy input usually first, in black); repeats after 8.
 const PALETTE: [(u8, u8, u8); 8] = [
     (0, 0, 0),
     (31, 119, 180),
@@ -21,8 +21,8 @@ const PALETTE: [(u8, u8, u8); 8] = [
     (227, 119, 194),
 ];
 
-/// The colour of the `i`-th method of a plot, as RGB.
-pub fn colour(i: usize) -> (u8, u8, u8) {
+/// The color of the `i`-th method of a plot, as RGB.
+pub fn series_color(i: usize) -> (u8, u8, u8) {
     PALETTE[i % PALETTE.len()]
 }
 
@@ -59,7 +59,7 @@ fn series(rows: &[Row], methods: &[&str], metric: ErrorMetric) -> Vec<(usize, Ve
     out
 }
 
-/// Draws `metric` against seconds (render + denoise) for `methods` (colour `i` for `methods[i]`) into a
+/// Draws `metric` against seconds (render + denoise) for `methods` (color `i` for `methods[i]`) into a
 /// `width`×`height` PNG. Without any usable point the plot is an empty frame.
 pub fn plot_error_vs_time(
     rows: &[Row],
@@ -99,7 +99,7 @@ pub fn plot_error_vs_time(
         let frame = [(x_lo, y_lo), (x_hi, y_lo), (x_hi, y_hi), (x_lo, y_hi), (x_lo, y_lo)];
         chart.draw_series(LineSeries::new(frame, BLACK)).map_err(err)?;
         for (i, points) in series(rows, methods, metric) {
-            let (r, g, b) = colour(i);
+            let (r, g, b) = series_color(i);
             let c = RGBColor(r, g, b);
             let xy: Vec<(f64, f64)> = points.iter().map(|p| (p.seconds.log10(), p.error.log10())).collect();
             chart.draw_series(LineSeries::new(xy.clone(), c.stroke_width(2))).map_err(err)?;

@@ -335,9 +335,9 @@ impl Report {
     }
 
     fn legend_markdown(&self) -> String {
-        let mut md = String::from("| colour | method |\n|---|---|\n");
+        let mut md = String::from("| color | method |\n|---|---|\n");
         for (i, method) in self.methods().iter().filter(|m| **m != REFERENCE).enumerate() {
-            let (r, g, b) = crate::plot::colour(i);
+            let (r, g, b) = crate::plot::series_color(i);
             let _ = writeln!(md, "| #{r:02x}{g:02x}{b:02x} | {} |", md_text(method));
         }
         md

@@ -22,7 +22,7 @@ fn hable(x: f64) -> f64 {
 /// OIDN's filmic curve on one linear value (already multiplied by the exposure):
 /// `min(1, hable(1.758141·x) / hable(11.2))`, in [0, 1].
 ///
-/// Like OIDN's toolkit, which replaces NaN by 0 and clamps HDR colour to ≥ 0 when it loads an image
+/// Like OIDN's toolkit, which replaces NaN by 0 and clamps HDR color to ≥ 0 when it loads an image
 /// (`training/image.py` `load_image`, `training/dataset.py` `load_image_features`), NaN and negative values
 /// map to 0; +Inf maps to 1. Computed in f64 so that huge finite values saturate instead of overflowing.
 pub fn filmic(x: f32) -> f32 {

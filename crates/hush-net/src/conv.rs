@@ -999,7 +999,7 @@ mod tests {
 
     /// Reproducible values in [−0.5, 0.5).
     fn uniform(seed: u64) -> impl FnMut() -> f32 {
-        let mut rng = crate::unet::SplitMix64(seed);
+        let mut rng = hush_hash::SplitMix64(seed);
         move || rng.next_f64() as f32 - 0.5
     }
 

@@ -15,7 +15,7 @@
 //! and negatives so too, but lets +Inf through its autoexposure, which then returns 0 and the whole output
 //! turns black. hush deliberately departs from OIDN there; finite input is processed exactly like OIDN.
 //!
-//! Channel order: color first, then the auxiliary features in the order of [`Features::aux`], 3 each.
+//! Channel order: color first, then the auxiliary features in the order of [`InputFeatures::aux`], 3 each.
 
 use candle_core::{Result, bail};
 use serde::{Deserialize, Serialize};
@@ -76,11 +76,11 @@ impl Feature {
 
 /// The network's input features: the noisy color (always, first) and the auxiliary features in order.
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Features {
+pub struct InputFeatures {
     pub aux: Vec<Feature>,
 }
 
-impl Features {
+impl InputFeatures {
     /// Fails on a repeated feature.
     pub fn new(aux: Vec<Feature>) -> Result<Self> {
         for (i, f) in aux.iter().enumerate() {
@@ -88,7 +88,7 @@ impl Features {
                 bail!("feature {} is listed twice", f.short_name())
             }
         }
-        Ok(Features { aux })
+        Ok(InputFeatures { aux })
     }
 
     /// Parses a comma-separated list of auxiliary features, e.g. `"diff,spec,nrm"` (the thesis' best) or
@@ -102,7 +102,7 @@ impl Features {
                 None => bail!("unknown feature {name:?}; known: alb, nrm, diff, spec"),
             }
         }
-        Features::new(aux)
+        InputFeatures::new(aux)
     }
 
     /// 3 for the color plus 3 per auxiliary feature.
@@ -111,8 +111,8 @@ impl Features {
     }
 }
 
-impl std::fmt::Display for Features {
-    /// `hdr,diff,spec,nrm`: the form [`Features::parse`] reads back.
+impl std::fmt::Display for InputFeatures {
+    /// `hdr,diff,spec,nrm`: the form [`InputFeatures::parse`] reads back.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str("hdr")?;
         for a in &self.aux {
@@ -162,7 +162,7 @@ enum Stage {
 /// that of the reference (as OIDN's `preprocess.py` does, so input and target share it). The transferred
 /// color is clamped to ≤ 1; use [`build_inference_input`] to denoise.
 pub fn build_input(
-    features: &Features,
+    features: &InputFeatures,
     width: usize,
     height: usize,
     color: &[f32],
@@ -177,7 +177,7 @@ pub fn build_input(
 /// (`core/input_process_kernel.h`): like [`build_input`] but the transferred color is not clamped to ≤ 1.
 /// `exposure` is usually [`crate::transfer::autoexposure`] of the color (OIDN's `inputScale`).
 pub fn build_inference_input(
-    features: &Features,
+    features: &InputFeatures,
     width: usize,
     height: usize,
     color: &[f32],
@@ -191,7 +191,7 @@ pub fn build_inference_input(
 #[allow(clippy::too_many_arguments)]
 fn build(
     stage: Stage,
-    features: &Features,
+    features: &InputFeatures,
     width: usize,
     height: usize,
     color: &[f32],

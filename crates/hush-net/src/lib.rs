@@ -12,7 +12,7 @@
 //! * [`transfer`]: autoexposure and the PU / log / sRGB transfer functions, on values and tensors.
 //! * [`denoise`]: one image through OIDN's whole inference path (autoexposure, input, network, output).
 //! * [`build_input`] (training) / [`build_inference_input`] (denoising) / [`prepare_color`] /
-//!   [`finish_color`]: the network's input and output, as OIDN prepares them ([`Features`] says which auxiliary images go in, in which order).
+//!   [`finish_color`]: the network's input and output, as OIDN prepares them ([`InputFeatures`] says which auxiliary images go in, in which order).
 //! * [`save_weights`] / [`load_weights`] / [`load_model`] / [`read_metadata`]: safetensors bytes carrying a
 //!   [`ModelInfo`] (network, features, transfer) as metadata. Reading and writing files is the caller's job.
 //! * [`load_tza`] / [`export_tza`] / [`parse_tza`] / [`write_tza`]: OIDN's Tensor Archive format, so hush runs
@@ -56,13 +56,13 @@ mod unet;
 mod weights;
 
 pub use denoise::denoise;
-pub use input::{Feature, Features, build_inference_input, build_input, finish_color, prepare_color};
+pub use input::{Feature, InputFeatures, build_inference_input, build_input, finish_color, prepare_color};
 pub use loss::Loss;
 pub use net::{DenoiseNet, Net, NetConfig, PATCH_MLP_KIND};
 pub use patch_mlp::{Activation, BURGER_HIDDEN, BURGER_PATCH, BURGER_STRIDE, PatchMlp, PatchMlpConfig};
 pub use tza::{TzaTensor, export_tza, infer_config, load_tza, oidn_features, parse_tza, write_tza};
 pub use unet::{
-    ALIGNMENT, ConvShape, THESIS_M1_WIDTH, THESIS_M2_WIDTH, UNet, UNetConfig, UNetKind, crop, fnv1a, hwc_to_nchw,
+    ALIGNMENT, ConvShape, THESIS_M1_WIDTH, THESIS_M2_WIDTH, UNet, UNetConfig, UNetKind, crop, hwc_to_nchw,
     init_weights, nchw_to_hwc, pad_to_multiple,
 };
 pub use weights::{F32View, METADATA_KEY, ModelInfo, load_model, load_weights, read_metadata, save_weights};

@@ -15,7 +15,7 @@
 use candle_core::{DType, Device, Result, Tensor, bail};
 use candle_nn::VarBuilder;
 
-use crate::input::{Feature, Features};
+use crate::input::{Feature, InputFeatures};
 use crate::transfer::Transfer;
 use crate::unet::{UNet, UNetConfig, UNetKind};
 use crate::weights::ModelInfo;
@@ -245,11 +245,11 @@ fn check_shapes(cfg: &UNetConfig, tensors: &[TzaTensor]) -> std::result::Result<
 
 /// The input features of an OIDN weight file, from its input channel count: 3 → color, 6 → color + albedo,
 /// 9 → color + albedo + normal (OIDN's `rt_hdr`, `rt_hdr_alb`, `rt_hdr_alb_nrm` and their variants).
-pub fn oidn_features(in_channels: usize) -> Result<Features> {
+pub fn oidn_features(in_channels: usize) -> Result<InputFeatures> {
     match in_channels {
-        3 => Features::new(vec![]),
-        6 => Features::new(vec![Feature::Albedo]),
-        9 => Features::new(vec![Feature::Albedo, Feature::Normal]),
+        3 => InputFeatures::new(vec![]),
+        6 => InputFeatures::new(vec![Feature::Albedo]),
+        9 => InputFeatures::new(vec![Feature::Albedo, Feature::Normal]),
         c => bail!(
             "TZA: the first convolution takes {c} channels; a TZA file does not say which features those are \
              (3 = color, 6 = color+albedo, 9 = color+albedo+normal are OIDN's); pass the features explicitly"
@@ -260,7 +260,7 @@ pub fn oidn_features(in_channels: usize) -> Result<Features> {
 /// Builds the network in a TZA archive (OIDN's official weights or [`export_tza`]'s output) on `device` in
 /// f32. `features` names the input features; `None` infers them with [`oidn_features`]. The transfer
 /// function is PU: OIDN's `hdr` weights (its `ldr` weights need [`Transfer::Srgb`]; set `info.transfer`).
-pub fn load_tza(bytes: &[u8], features: Option<Features>, device: &Device) -> Result<(UNet, ModelInfo)> {
+pub fn load_tza(bytes: &[u8], features: Option<InputFeatures>, device: &Device) -> Result<(UNet, ModelInfo)> {
     let tensors = parse_tza(bytes)?;
     let net = infer_config(&tensors)?;
     let features = match features {

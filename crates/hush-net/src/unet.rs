@@ -6,6 +6,7 @@ use candle_core::{Device, Module, Result, Tensor, bail};
 use crate::conv::conv3x3;
 use crate::resample::{max_pool2, upsample2, upsample2_cat};
 use candle_nn::{VarBuilder, VarMap};
+use hush_hash::{SplitMix64, fnv1a};
 use serde::{Deserialize, Serialize};
 
 /// Input height and width must be multiples of this (four 2×2 poolings).
@@ -432,27 +433,4 @@ pub fn init_weights(varmap: &VarMap, seed: u64) -> Result<()> {
         var.set(&t)?;
     }
     Ok(())
-}
-
-/// The 64-bit FNV-1a hash of `bytes`: a stable, dependency-free fingerprint (of weight names, cache keys).
-pub fn fnv1a(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| (h ^ b as u64).wrapping_mul(0x0100_0000_01b3))
-}
-
-/// Steele, Lea and Flood's SplitMix64: tiny, seedable, good enough for initial weights.
-pub(crate) struct SplitMix64(pub(crate) u64);
-
-impl SplitMix64 {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
-    pub(crate) fn next_f64(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
 }

@@ -9,7 +9,7 @@ use candle_nn::{VarBuilder, VarMap};
 use safetensors::tensor::{Dtype, SafeTensors, View};
 use serde::{Deserialize, Serialize};
 
-use crate::input::Features;
+use crate::input::InputFeatures;
 use crate::net::{Net, NetConfig};
 use crate::transfer::Transfer;
 
@@ -21,7 +21,7 @@ pub const METADATA_KEY: &str = "hush.config";
 pub struct ModelInfo {
     /// The network; files from before the patch MLP hold a bare U-Net configuration, which reads as one.
     pub net: NetConfig,
-    pub features: Features,
+    pub features: InputFeatures,
     /// Transfer function applied to the color and the target.
     pub transfer: Transfer,
 }

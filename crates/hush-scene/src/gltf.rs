@@ -5,14 +5,14 @@
 //! perspective camera (`yfov`, `aspectRatio`), and metallic-roughness materials mapped as:
 //!
 //! - `KHR_materials_transmission` factor > 0: a dielectric of `KHR_materials_ior` (default
-//!   1.5), GGX alpha = roughness², transmittance = base colour;
-//! - metallic ≥ 0.5: a conductor reflecting the base colour (Fresnel factor 1), alpha =
+//!   1.5), GGX alpha = roughness², transmittance = base color;
+//! - metallic ≥ 0.5: a conductor reflecting the base color (Fresnel factor 1), alpha =
 //!   roughness²;
-//! - otherwise roughness 1: diffuse with the base colour (or its texture, times its factor);
-//!   roughness < 1: a rough plastic (base colour under an IOR-1.5 coating, alpha = roughness²).
+//! - otherwise roughness 1: diffuse with the base color (or its texture, times its factor);
+//!   roughness < 1: a rough plastic (base color under an IOR-1.5 coating, alpha = roughness²).
 //!
 //! `doubleSided` is `two_sided`; `emissiveFactor` × `KHR_materials_emissive_strength` is the
-//! emitted radiance. Base colour textures are sRGB and are decoded to linear. A mirroring node
+//! emitted radiance. Base color textures are sRGB and are decoded to linear. A mirroring node
 //! transform flips the winding, as glTF specifies. Unsupported features (orthographic cameras,
 //! other textures, alpha blending, other extensions) are warnings.
 
@@ -210,7 +210,7 @@ impl Loader<'_> {
         Ok(())
     }
 
-    /// The base colour texture `image` (sRGB, decoded to linear) times `factor`, made once.
+    /// The base color texture `image` (sRGB, decoded to linear) times `factor`, made once.
     fn texture(&mut self, image: usize, factor: Vec3) -> Result<TextureId, String> {
         let key = (image, factor.to_array().map(f32::to_bits));
         if let Some(&id) = self.texture_ids.get(&key) {
@@ -270,11 +270,11 @@ impl Loader<'_> {
         let mut base = Reflectance::Rgb(base_factor);
         if let Some(info) = pbr.base_color_texture() {
             if info.tex_coord() != 0 {
-                self.warn(format!("'{label}': base colour texture uses UV set {}: hush reads set 0", info.tex_coord()));
+                self.warn(format!("'{label}': base color texture uses UV set {}: hush reads set 0", info.tex_coord()));
             }
             match self.texture(info.texture().source().index(), base_factor) {
                 Ok(id) => base = Reflectance::Texture(id),
-                Err(e) => self.warn(format!("'{label}': {e}: the base colour factor is used")),
+                Err(e) => self.warn(format!("'{label}': {e}: the base color factor is used")),
             }
         }
         if pbr.metallic_roughness_texture().is_some() {
@@ -327,7 +327,7 @@ impl Loader<'_> {
             }
             if matches!(base, Reflectance::Texture(_)) {
                 self.warn(format!(
-                    "'{label}': a textured metal colour is not supported yet: the texture's mean is used"
+                    "'{label}': a textured metal color is not supported yet: the texture's mean is used"
                 ));
             }
             Material::Conductor {

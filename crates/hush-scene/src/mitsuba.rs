@@ -229,7 +229,7 @@ impl Parser<'_, '_> {
         Ok(out)
     }
 
-    /// A colour: `<rgb>` (linear), `<srgb>` (sRGB-encoded, or `#rrggbb`), `<float>` (grey) or
+    /// A color: `<rgb>` (linear), `<srgb>` (sRGB-encoded, or `#rrggbb`), `<float>` (grey) or
     /// `<spectrum>` (a constant, or `wavelength:value` pairs averaged to a grey, with a warning).
     fn color(&mut self, node: Node) -> Result<Vec3, SceneError> {
         match self.tag(node) {
@@ -244,7 +244,7 @@ impl Parser<'_, '_> {
                         let byte = |i: usize| u8::from_str_radix(&hex[i..i + 2], 16);
                         match (byte(0), byte(2), byte(4)) {
                             (Ok(r), Ok(g), Ok(b)) => Vec3::new(r as f32, g as f32, b as f32) / 255.0,
-                            _ => return Err(self.err(node, format!("'{v}' is not a #rrggbb colour"))),
+                            _ => return Err(self.err(node, format!("'{v}' is not a #rrggbb color"))),
                         }
                     }
                     _ => self.vec3(node, &v)?,
@@ -253,7 +253,7 @@ impl Parser<'_, '_> {
             }
             "spectrum" => {
                 if node.attribute("filename").is_some() {
-                    return Err(self.err(node, "spectrum files are not supported: give the colour as <rgb>"));
+                    return Err(self.err(node, "spectrum files are not supported: give the color as <rgb>"));
                 }
                 let v = self.attr(node, "value")?;
                 if !v.contains(':') {
@@ -278,12 +278,12 @@ impl Parser<'_, '_> {
             }
             _ => Err(self.err(
                 node,
-                format!("{} is not a colour (use <rgb>, <srgb>, <spectrum> or <float>)", self.describe(node)),
+                format!("{} is not a color (use <rgb>, <srgb>, <spectrum> or <float>)", self.describe(node)),
             )),
         }
     }
 
-    /// A colour or a texture (`<texture type="bitmap">` or a `<ref>` to one).
+    /// A color or a texture (`<texture type="bitmap">` or a `<ref>` to one).
     fn reflectance(&mut self, node: Node) -> Result<Reflectance, SceneError> {
         match self.tag(node) {
             "texture" => self.texture(node),
@@ -943,7 +943,7 @@ impl Parser<'_, '_> {
         }
     }
 
-    /// A constant colour where hush has no texture support; a texture gives its mean, with a warning.
+    /// A constant color where hush has no texture support; a texture gives its mean, with a warning.
     fn constant_color(&mut self, node: Node, what: &str) -> Result<Vec3, SceneError> {
         match self.reflectance(node)? {
             Reflectance::Rgb(c) => Ok(c),

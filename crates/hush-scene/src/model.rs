@@ -72,7 +72,7 @@ impl PixelFilter {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct TextureId(pub u32);
 
-/// A reflectance: a constant linear RGB colour or a texture looked up by the mesh's UVs.
+/// A reflectance: a constant linear RGB color or a texture looked up by the mesh's UVs.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Reflectance {
     Rgb(Vec3),
@@ -107,7 +107,7 @@ impl Texture {
         Vec3::new(self.data[i], self.data[i + 1], self.data[i + 2])
     }
 
-    /// The mean texel value (a stand-in colour where a texture cannot be used).
+    /// The mean texel value (a stand-in color where a texture cannot be used).
     pub fn mean(&self) -> Vec3 {
         let mut sum = [0f64; 3];
         for px in self.data.chunks_exact(3) {

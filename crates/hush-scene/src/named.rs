@@ -7,7 +7,7 @@ use crate::ComplexIor;
 /// RGB complex IORs of the conductors Mitsuba names (`<string name="material" value="Cu"/>`).
 ///
 /// Source: Tungsten's `src/core/bsdfs/ComplexIorData.hpp` (B. Bitterli, github.com/tunabrain/tungsten),
-/// the measured spectra Mitsuba ships integrated against linear-sRGB colour matching. The shared
+/// the measured spectra Mitsuba ships integrated against linear-sRGB color matching. The shared
 /// scenes were exported with these numbers (e.g. veach-mis's plates are its "Cu", living-room's
 /// steel is its "Al"). Mitsuba's "none" (a perfect mirror) is handled by the caller. The digits are the
 /// source's, kept as printed there so that the table can be checked against it.

@@ -9,9 +9,9 @@
 //! a SplitMix64 stream through IEEE-exact f32 arithmetic (no transcendental function reaches the
 //! XML; rotations are written as angles for the loader) and is printed rounded.
 //!
-//! [`Features`] says what the generator may use. The default, [`Features::KERNEL`], is what
+//! [`Ingredients`] says what the generator may use. The default, [`Ingredients::KERNEL`], is what
 //! hush's path tracer renders today (diffuse, smooth and rough conductors, smooth plastic,
-//! smooth and thin dielectrics, area lights); [`Features::ALL`] adds rough dielectrics, rough
+//! smooth and thin dielectrics, area lights); [`Ingredients::ALL`] adds rough dielectrics, rough
 //! plastic, bitmap textures and environment emitters (`constant`, `envmap`).
 //!
 //! Every scene has a style drawn from its seed: `standard` (mixed materials and lights),
@@ -22,13 +22,14 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
+use hush_hash::SplitMix64;
 
 /// Bumped whenever the same seed and options would give a different scene.
 pub const GENERATOR_VERSION: u32 = 2;
 
 /// What the generator may put into a scene beyond what hush's kernel renders today.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Features {
+pub struct Ingredients {
     /// `roughdielectric` (frosted glass).
     pub rough_dielectric: bool,
     /// `roughplastic`.
@@ -39,39 +40,39 @@ pub struct Features {
     pub environment: bool,
 }
 
-impl Features {
-    /// None of the optional features: smooth glass, glossy metal, plastic and diffuse surfaces lit by area
+impl Ingredients {
+    /// None of the optional ingredients: smooth glass, glossy metal, plastic and diffuse surfaces lit by area
     /// lights (generator version 1's default).
-    pub const BASIC: Features =
-        Features { rough_dielectric: false, rough_plastic: false, textures: false, environment: false };
+    pub const BASIC: Ingredients =
+        Ingredients { rough_dielectric: false, rough_plastic: false, textures: false, environment: false };
     /// Everything the generator knows.
-    pub const ALL: Features =
-        Features { rough_dielectric: true, rough_plastic: true, textures: true, environment: true };
+    pub const ALL: Ingredients =
+        Ingredients { rough_dielectric: true, rough_plastic: true, textures: true, environment: true };
     /// What hush's path tracer renders: since generator version 2, everything.
-    pub const KERNEL: Features = Features::ALL;
-    /// The names accepted by [`Features::parse`] for the single features.
+    pub const KERNEL: Ingredients = Ingredients::ALL;
+    /// The names accepted by [`Ingredients::parse`] for the single ingredients.
     pub const NAMES: [&'static str; 4] = ["roughdielectric", "roughplastic", "textures", "environment"];
 
-    /// `default` or `""` (= [`Features::KERNEL`]), `all`, `basic` (= [`Features::BASIC`]), or a
-    /// comma-separated list of [`Features::NAMES`]: the basic set plus those.
-    pub fn parse(text: &str) -> Result<Features, String> {
+    /// `default` or `""` (= [`Ingredients::KERNEL`]), `all`, `basic` (= [`Ingredients::BASIC`]), or a
+    /// comma-separated list of [`Ingredients::NAMES`]: the basic set plus those.
+    pub fn parse(text: &str) -> Result<Ingredients, String> {
         if text.trim().is_empty() {
-            return Ok(Features::KERNEL);
+            return Ok(Ingredients::KERNEL);
         }
-        let mut f = Features::BASIC;
+        let mut f = Ingredients::BASIC;
         for word in text.split(',').map(str::trim).filter(|w| !w.is_empty()) {
             match word {
-                "default" | "kernel" => f = Features::KERNEL,
-                "all" => f = Features::ALL,
-                "basic" => f = Features::BASIC,
+                "default" | "kernel" => f = Ingredients::KERNEL,
+                "all" => f = Ingredients::ALL,
+                "basic" => f = Ingredients::BASIC,
                 "roughdielectric" => f.rough_dielectric = true,
                 "roughplastic" => f.rough_plastic = true,
                 "textures" => f.textures = true,
                 "environment" => f.environment = true,
                 other => {
                     return Err(format!(
-                        "unknown generator feature '{other}': use default (= all), basic, or a list of {}",
-                        Features::NAMES.join(", ")
+                        "unknown generator ingredient '{other}': use default (= all), basic, or a list of {}",
+                        Ingredients::NAMES.join(", ")
                     ));
                 }
             }
@@ -79,23 +80,23 @@ impl Features {
         Ok(f)
     }
 
-    /// The inverse of [`Features::parse`]: `default`, `basic` or the list of enabled features.
+    /// The inverse of [`Ingredients::parse`]: `default`, `basic` or the list of enabled ingredients.
     pub fn describe(&self) -> String {
-        if *self == Features::KERNEL {
+        if *self == Ingredients::KERNEL {
             return "default".into();
         }
-        if *self == Features::BASIC {
+        if *self == Ingredients::BASIC {
             return "basic".into();
         }
         let on = [self.rough_dielectric, self.rough_plastic, self.textures, self.environment];
-        Features::NAMES.iter().zip(on).filter(|(_, on)| *on).map(|(n, _)| *n).collect::<Vec<_>>().join(",")
+        Ingredients::NAMES.iter().zip(on).filter(|(_, on)| *on).map(|(n, _)| *n).collect::<Vec<_>>().join(",")
     }
 }
 
-/// How to generate: which features, the film size, and where meshes may be borrowed from.
+/// How to generate: which ingredients, the film size, and where meshes may be borrowed from.
 #[derive(Clone, Debug)]
 pub struct GeneratorOptions {
-    pub features: Features,
+    pub ingredients: Ingredients,
     pub width: u32,
     pub height: u32,
     /// A folder of scenes (such as `../shared/scenes`): small OBJ meshes below its `*/models/` folders
@@ -105,7 +106,7 @@ pub struct GeneratorOptions {
 
 impl Default for GeneratorOptions {
     fn default() -> Self {
-        GeneratorOptions { features: Features::KERNEL, width: 256, height: 256, borrow_meshes: None }
+        GeneratorOptions { ingredients: Ingredients::KERNEL, width: 256, height: 256, borrow_meshes: None }
     }
 }
 
@@ -219,9 +220,9 @@ impl GeneratedScene {
 /// The seed of attempt `attempt` of scene `index` of a run seeded with `seed` (attempts follow
 /// a rejected scene).
 pub fn scene_seed(seed: u64, index: u64, attempt: u64) -> u64 {
-    let mut r = Rng(seed ^ 0x6875_7368_7363_6e65);
-    let a = r.next_u64() ^ index.wrapping_mul(0x9E37_79B9_7F4A_7C15);
-    let mut r = Rng(a);
+    let mut r = Rng(SplitMix64(seed ^ 0x6875_7368_7363_6e65));
+    let a = r.next_u64() ^ index.wrapping_mul(SplitMix64::GOLDEN);
+    let mut r = Rng(SplitMix64(a));
     r.next_u64() ^ attempt.wrapping_mul(0xD1B5_4A32_D192_ED03)
 }
 
@@ -232,21 +233,17 @@ pub fn generate(seed: u64, options: &GeneratorOptions) -> GeneratedScene {
     g.finish()
 }
 
-/// SplitMix64 (Steele, Lea and Flood): tiny, seedable and the same everywhere.
-struct Rng(u64);
+/// hush-hash's SplitMix64 with the draws the generator needs.
+struct Rng(SplitMix64);
 
 impl Rng {
     fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
+        self.0.next_u64()
     }
 
     /// Uniform in [0, 1), a multiple of 2^-24 (exact in f32).
     fn unit(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+        self.0.next_f32()
     }
 
     fn range(&mut self, lo: f32, hi: f32) -> f32 {
@@ -274,7 +271,7 @@ impl Rng {
         weights.iter().rposition(|w| *w > 0.0).unwrap_or(0)
     }
 
-    /// A colour with each channel in [lo, hi).
+    /// A color with each channel in [lo, hi).
     fn color(&mut self, lo: f32, hi: f32) -> Vec3 {
         Vec3::new(self.range(lo, hi), self.range(lo, hi), self.range(lo, hi))
     }
@@ -346,7 +343,7 @@ struct Bsdf {
 
 impl<'a> Gen<'a> {
     fn new(seed: u64, options: &'a GeneratorOptions) -> Self {
-        let mut rng = Rng(seed);
+        let mut rng = Rng(SplitMix64(seed));
         let style = match rng.weighted(&[0.55, 0.15, 0.15, 0.15]) {
             0 => Style::Standard,
             1 => Style::Dark,
@@ -403,7 +400,7 @@ impl<'a> Gen<'a> {
             "<!-- hush procedural scene: generator {GENERATOR_VERSION}, seed {}, style {}, features {} -->",
             self.seed,
             self.style.name(),
-            o.features.describe()
+            o.ingredients.describe()
         );
         let _ = writeln!(head, "<scene version=\"3.0.0\">");
         let _ = writeln!(head, "  <integrator type=\"path\"><integer name=\"max_depth\" value=\"8\"/></integrator>");
@@ -468,7 +465,7 @@ impl<'a> Gen<'a> {
         self.bsdf("diffuse", MaterialClass::Diffuse, &p, true)
     }
 
-    /// A diffuse surface with a generated texture (checks, stripes or tiles of two colours).
+    /// A diffuse surface with a generated texture (checks, stripes or tiles of two colors).
     fn textured(&mut self, a: Vec3, b: Vec3) -> Bsdf {
         let file = format!("texture{}.png", self.assets.len());
         let pattern = self.rng.below(3);
@@ -496,7 +493,7 @@ impl<'a> Gen<'a> {
 
     /// A random surface for an object; `glass_bias` raises the odds of glass.
     fn random_material(&mut self, glass_bias: f32) -> Bsdf {
-        let f = self.options.features;
+        let f = self.options.ingredients;
         let dark = self.style == Style::Dark;
         let weights = [
             3.0,                                     // diffuse
@@ -580,7 +577,7 @@ impl<'a> Gen<'a> {
     /// A surface for a wall, the floor or the ceiling: mostly diffuse.
     fn surface_material(&mut self) -> Bsdf {
         let (lo, hi) = if self.style == Style::Dark { (0.02, 0.2) } else { (0.2, 0.85) };
-        if self.options.features.textures && self.rng.chance(0.3) {
+        if self.options.ingredients.textures && self.rng.chance(0.3) {
             let (a, b) = (self.rng.color(lo, hi), self.rng.color(lo, hi));
             return self.textured(a, b);
         }
@@ -903,7 +900,7 @@ impl<'a> Gen<'a> {
     }
 
     fn environment_light(&mut self) {
-        if !self.options.features.environment || self.style == Style::Dark || !self.rng.chance(0.5) {
+        if !self.options.ingredients.environment || self.style == Style::Dark || !self.rng.chance(0.5) {
             return;
         }
         if self.rng.chance(0.4) {

@@ -112,7 +112,7 @@ pub(crate) fn gpu_material(
     textures: &[Texture],
     aux: &mut Aux,
 ) -> Result<GpuMaterial, TraceError> {
-    // A reflectance as (constant colour or texture mean, texture offset or NO_TEXTURE).
+    // A reflectance as (constant color or texture mean, texture offset or NO_TEXTURE).
     let mut reflectance = |r: &Reflectance| match *r {
         Reflectance::Rgb(v) => Ok((v, NO_TEXTURE)),
         Reflectance::Texture(id) => aux.texture(id, textures).map(|(offset, mean)| (mean, offset)),

@@ -13,7 +13,7 @@
 
 use half::f16;
 use hush_dataset::Image;
-use hush_net::fnv1a;
+use hush_hash::fnv1a;
 
 use crate::{Result, TrainError, TrainSample};
 

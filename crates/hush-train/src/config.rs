@@ -1,7 +1,7 @@
 //! [`TrainConfig`]: everything that determines a training run.
 
 use hush_net::transfer::Transfer;
-use hush_net::{ALIGNMENT, Features, Loss, ModelInfo, NetConfig, UNetConfig};
+use hush_net::{ALIGNMENT, InputFeatures, Loss, ModelInfo, NetConfig, UNetConfig};
 use serde::{Deserialize, Serialize};
 
 use crate::{Augment, OptimizerConfig, Result, Schedule, TrainError};
@@ -11,7 +11,7 @@ use crate::{Augment, OptimizerConfig, Result, Schedule, TrainError};
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TrainConfig {
     /// Auxiliary input features; the samples' input channels must be `features.in_channels()`.
-    pub features: Features,
+    pub features: InputFeatures,
     /// The transfer function the samples' color and target went through (recorded in the weights).
     pub transfer: Transfer,
     /// A U-Net or the patch MLP; run configurations from before the patch MLP read as U-Nets.
@@ -42,7 +42,7 @@ pub struct TrainConfig {
 impl TrainConfig {
     /// The thesis' recipe for `features` at full OIDN width: MIX loss, Adam at a constant 1e-4, 256² crops,
     /// PU transfer, flips. `steps`, `batch` and `eval_every` are placeholders to adjust to the machine.
-    pub fn thesis(features: Features) -> Self {
+    pub fn thesis(features: InputFeatures) -> Self {
         let net = UNetConfig::oidn(features.in_channels()).into();
         TrainConfig {
             features,

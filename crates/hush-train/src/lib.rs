@@ -18,7 +18,7 @@
 //! ```
 //! use std::ops::ControlFlow;
 //! use hush_dataset::Image;
-//! use hush_net::{Features, UNetConfig, UNetKind};
+//! use hush_net::{InputFeatures, UNetConfig, UNetKind};
 //! use hush_train::{TrainConfig, TrainSample, train};
 //!
 //! // A 32×32 grey target and a noisy input, color only.
@@ -26,7 +26,7 @@
 //! let input = Image::from_fn(32, 32, 3, |x, y, c| 0.5 + 0.2 * (((x * 7 + y * 13 + c) % 5) as f32 - 2.0) / 2.0);
 //! let samples = vec![TrainSample { input, target }];
 //!
-//! let mut cfg = TrainConfig::thesis(Features::default());
+//! let mut cfg = TrainConfig::thesis(InputFeatures::default());
 //! cfg.net = UNetConfig { kind: UNetKind::Unet, in_channels: 3, out_channels: 3, width: 0.25 }.into();
 //! (cfg.steps, cfg.batch, cfg.crop) = (2, 1, 16);
 //! let trained = train(&cfg, &samples, &[], &candle_core::Device::Cpu, None, |report| {

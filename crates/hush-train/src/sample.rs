@@ -1,8 +1,9 @@
 //! Training samples and the random crops, flips and batches drawn from them.
 
 use hush_dataset::Image;
+use hush_hash::SplitMix64;
 use hush_net::transfer::{Transfer, autoexposure};
-use hush_net::{Feature, Features, build_input, prepare_color};
+use hush_net::{Feature, InputFeatures, build_input, prepare_color};
 use serde::{Deserialize, Serialize};
 
 use crate::{Result, TrainError};
@@ -26,7 +27,7 @@ impl TrainSample {
     /// before the transfer function; auxiliary features are prepared by [`hush_net::build_input`]. `aux`
     /// must follow `features.aux` in order; every image has 3 channels and the reference's size.
     pub fn from_linear(
-        features: &Features,
+        features: &InputFeatures,
         transfer: Transfer,
         color: &Image,
         aux: &[&Image],
@@ -134,7 +135,7 @@ impl Sampler {
         let n = self.sizes.len() as u64;
         let pass = k / n;
         if self.order.0 != pass {
-            let mut rng = SplitMix64::new(self.seed, 0x6f_7264_6572 ^ pass.rotate_left(17));
+            let mut rng = SplitMix64::keyed(self.seed, 0x6f_7264_6572 ^ pass.rotate_left(17));
             let mut order: Vec<usize> = (0..self.sizes.len()).collect();
             for i in (1..order.len()).rev() {
                 order.swap(i, rng.below(i as u64 + 1) as usize);
@@ -143,7 +144,7 @@ impl Sampler {
         }
         let sample = self.order.1[(k % n) as usize];
         let (w, h) = self.sizes[sample];
-        let mut rng = SplitMix64::new(self.seed, k);
+        let mut rng = SplitMix64::keyed(self.seed, k);
         let x = rng.below((w - self.crop + 1) as u64) as usize;
         let y = rng.below((h - self.crop + 1) as u64) as usize;
         let (orientation, color_perm, normal_perm) = match self.augment {
@@ -161,33 +162,9 @@ impl Sampler {
     }
 }
 
-/// SplitMix64 keyed by (seed, stream).
-struct SplitMix64(u64);
-
-impl SplitMix64 {
-    fn new(seed: u64, stream: u64) -> Self {
-        let mut s = SplitMix64(seed ^ 0x5851_f42d_4c95_7f2d);
-        let a = s.next();
-        SplitMix64(a ^ stream.wrapping_mul(0x9e37_79b9_7f4a_7c15))
-    }
-
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `0..n` (n > 0), by Lemire's multiply-shift (bias below 2^-32 for the sizes used here).
-    fn below(&mut self, n: u64) -> u64 {
-        ((self.next() as u128 * n as u128) >> 64) as u64
-    }
-}
-
 /// For each input channel, the channel of the unpermuted image it is read from, given the crop's
 /// permutations: color and reflectance features follow `color_perm`, normals `normal_perm`.
-pub(crate) fn channel_sources(features: &Features, crop: &Crop, target: bool) -> Vec<usize> {
+pub(crate) fn channel_sources(features: &InputFeatures, crop: &Crop, target: bool) -> Vec<usize> {
     let cp = PERMUTATIONS[crop.color_perm as usize];
     let np = PERMUTATIONS[crop.normal_perm as usize];
     if target {
@@ -204,7 +181,7 @@ pub(crate) fn channel_sources(features: &Features, crop: &Crop, target: bool) ->
 /// Copies the crops of the inputs (or targets) into an NCHW buffer of `crops.len() × channels × size²`.
 pub(crate) fn gather(
     samples: &[TrainSample],
-    features: &Features,
+    features: &InputFeatures,
     crops: &[Crop],
     target: bool,
     size: usize,

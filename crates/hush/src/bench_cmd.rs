@@ -13,7 +13,7 @@ use anyhow::{Result, bail};
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{VarBuilder, VarMap};
 use clap::{Args, Subcommand};
-use hush_net::{Features, Loss, ModelInfo, Net, UNetConfig, UNetKind, init_weights, transfer::Transfer};
+use hush_net::{InputFeatures, Loss, ModelInfo, Net, UNetConfig, UNetKind, init_weights, transfer::Transfer};
 use hush_train::{Optimizer, OptimizerConfig};
 
 use crate::cpu::{cpu_seconds, peak_rss_bytes};
@@ -65,7 +65,7 @@ impl NetArgs {
         let Some(kind) = UNetKind::parse(&self.kind) else {
             bail!("unknown --kind {:?}; known: unet, unet_small, unet_large, autoencoder", self.kind)
         };
-        let features = Features::parse(&self.features)?;
+        let features = InputFeatures::parse(&self.features)?;
         let net = UNetConfig { kind, in_channels: features.in_channels(), out_channels: 3, width: self.width };
         let info = ModelInfo { net: net.into(), features, transfer: Transfer::Pu };
         info.validate()?;

@@ -12,6 +12,7 @@ use hush_dataset::{
     ViewGeneration, check_dataset, check_image, despeckle, link_or_copy, luminance, read_rgb, temp_files, temp_target,
     write_rgb,
 };
+use hush_hash::SplitMix64;
 use hush_scene::{Camera, Scene};
 use hush_trace::{RenderOutput, RenderSettings, Renderer};
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
@@ -116,40 +117,22 @@ const MAX_ATTEMPTS: u32 = 8;
 pub(crate) const PROBE_SIZE: u32 = 32;
 pub(crate) const PROBE_SPP: u32 = 4;
 
-/// SplitMix64: a tiny, well-mixed generator for seeds and view jitter.
-pub struct SplitMix(pub u64);
-
-impl SplitMix {
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [lo, hi).
-    pub fn uniform(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * ((self.next_u64() >> 40) as f32 / (1u64 << 24) as f32)
-    }
-}
-
 /// A seed for one render, derived from the dataset seed and what is rendered, so that every
 /// image (and the reference in particular) is statistically independent of every other.
 fn render_seed(seed: u64, scene: &str, view: u32, what: &str) -> u64 {
-    let mut h = SplitMix(seed);
+    let mut h = SplitMix64(seed);
     let mut acc = h.next_u64();
     for b in scene.bytes().chain([0xff]).chain(what.bytes()) {
-        acc = SplitMix(acc ^ b as u64).next_u64();
+        acc = SplitMix64(acc ^ b as u64).next_u64();
     }
-    SplitMix(acc ^ view as u64).next_u64()
+    SplitMix64(acc ^ view as u64).next_u64()
 }
 
 /// A candidate camera: it orbits the scene camera's target by up to ±20° of yaw and ±8° of pitch, moves
 /// 10 % closer or farther, shifts the target by up to 3 % of the scene's size and scales the field of view
 /// by ±10 %.
 fn jitter_camera(base: &Camera, scene: &Scene, seed: u64) -> Camera {
-    let mut rng = SplitMix(seed);
+    let mut rng = SplitMix64(seed);
     let (forward, right, up) = base.basis();
     let yaw = Quat::from_axis_angle(up, rng.uniform(-20.0, 20.0).to_radians());
     let pitch = Quat::from_axis_angle(right, rng.uniform(-8.0, 8.0).to_radians());
@@ -714,7 +697,7 @@ fn generate_procedural(args: &DatasetArgs, out: &Path, renderer: &Renderer) -> R
             "generator_version": hush_scene::procedural::GENERATOR_VERSION,
             "seed": args.seed,
             "index": index,
-            "features": options.features.describe(),
+            "features": options.ingredients.describe(),
             "width": size,
             "height": size,
             "borrow_meshes": options.borrow_meshes,
@@ -759,7 +742,7 @@ fn generate_procedural(args: &DatasetArgs, out: &Path, renderer: &Renderer) -> R
         count: args.procedural,
         seed: args.seed,
         generator_version: hush_scene::procedural::GENERATOR_VERSION,
-        features: options.features.describe(),
+        features: options.ingredients.describe(),
         scenes,
     })
 }

@@ -8,7 +8,7 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 use hush_dataset::{luminance, write_atomic};
 use hush_scene::Scene;
-use hush_scene::procedural::{self, Features, GENERATOR_VERSION, GeneratedScene, GeneratorOptions, MaterialClass};
+use hush_scene::procedural::{self, GENERATOR_VERSION, GeneratedScene, GeneratorOptions, Ingredients, MaterialClass};
 use hush_trace::{RenderSettings, Renderer};
 
 use crate::dataset_cmd::{MIN_LIT_FRACTION, PROBE_SIZE, PROBE_SPP};
@@ -51,8 +51,8 @@ pub struct GeneratorArgs {
     /// What the generator may use: `default` (what the path tracer renders today), `all` (adds rough glass,
     /// rough plastic, textures and environment lights), or a list of roughdielectric, roughplastic, textures,
     /// environment.
-    #[arg(long, default_value = "default", value_parser = Features::parse)]
-    pub features: Features,
+    #[arg(long, default_value = "default", value_parser = Ingredients::parse)]
+    pub ingredients: Ingredients,
     /// Place small OBJ meshes found below DIR/*/models/ (e.g. ../shared/scenes) as furniture, by path.
     #[arg(long, value_name = "DIR")]
     pub borrow_meshes: Option<PathBuf>,
@@ -60,7 +60,7 @@ pub struct GeneratorArgs {
 
 impl GeneratorArgs {
     pub fn options(&self, width: u32, height: u32) -> GeneratorOptions {
-        GeneratorOptions { features: self.features, width, height, borrow_meshes: self.borrow_meshes.clone() }
+        GeneratorOptions { ingredients: self.ingredients, width, height, borrow_meshes: self.borrow_meshes.clone() }
     }
 }
 
@@ -104,7 +104,7 @@ pub fn generate_into(
     options: &GeneratorOptions,
     renderer: Option<&Renderer>,
 ) -> Result<Written> {
-    first_lit(xml, options.features, renderer, |attempt| {
+    first_lit(xml, options.ingredients, renderer, |attempt| {
         procedural::generate(procedural::scene_seed(seed, index, attempt as u64), options)
     })
     .with_context(|| format!("procedural scene {index} of seed {seed}"))
@@ -114,7 +114,7 @@ pub fn generate_into(
 /// whose probe finds at least half of its pixels lit; the assets of rejected attempts are removed.
 fn first_lit(
     xml: &Path,
-    features: Features,
+    ingredients: Ingredients,
     renderer: Option<&Renderer>,
     mut draw: impl FnMut(u32) -> GeneratedScene,
 ) -> Result<Written> {
@@ -138,9 +138,9 @@ fn first_lit(
             None => None,
             Some(r) => Some(lit_fraction(r, &scene, PROBE_SEED ^ attempt as u64).with_context(|| {
                 format!(
-                    "probing the generated scene (features {}): the path tracer cannot render it; \
-                     generate with --features default, or with --no-probe to write it anyway",
-                    features.describe()
+                    "probing the generated scene (ingredients {}): the path tracer cannot render it; \
+                     generate with --ingredients default, or with --no-probe to write it anyway",
+                    ingredients.describe()
                 )
             })?),
         };
@@ -186,7 +186,7 @@ pub fn summary_json(w: &Written, seed: u64, index: u64, options: &GeneratorOptio
         "index": index,
         "attempt": w.attempt,
         "scene_seed": w.scene.seed,
-        "features": options.features.describe(),
+        "features": options.ingredients.describe(),
         "style": w.scene.style,
         "shapes": w.scene.shapes.len(),
         "materials": classes,
@@ -260,14 +260,15 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
 
         let xml = dir.join("a/scene.xml");
-        let w = first_lit(&xml, options.features, Some(&renderer), |a| if a == 0 { dark.clone() } else { lit.clone() })
-            .unwrap();
+        let w =
+            first_lit(&xml, options.ingredients, Some(&renderer), |a| if a == 0 { dark.clone() } else { lit.clone() })
+                .unwrap();
         assert_eq!(w.attempt, 1);
         assert!(w.lit_fraction.unwrap() >= super::MIN_LIT_FRACTION);
         assert_eq!(std::fs::read_to_string(&xml).unwrap(), lit.xml);
 
         let xml = dir.join("b/scene.xml");
-        let err = first_lit(&xml, options.features, Some(&renderer), |_| dark.clone()).unwrap_err().to_string();
+        let err = first_lit(&xml, options.ingredients, Some(&renderer), |_| dark.clone()).unwrap_err().to_string();
         assert!(err.contains("probe pixels lit") && err.contains("best: attempt 0, 0 %"), "{err}");
         assert!(!xml.exists() && !dir.join("b/cylinder.obj").exists());
         let _ = std::fs::remove_dir_all(&dir);

@@ -7,8 +7,9 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use hush_dataset::{Image, Manifest, Split, load_view, write_atomic};
+use hush_hash::fnv1a;
 use hush_net::transfer::Transfer;
-use hush_net::{Activation, Features, Loss, NetConfig, PatchMlpConfig, UNetConfig, UNetKind, fnv1a};
+use hush_net::{Activation, InputFeatures, Loss, NetConfig, PatchMlpConfig, UNetConfig, UNetKind};
 use hush_train::{
     Augment, EpochRow, LossRow, OptimizerConfig, PREPARATION_VERSION, Schedule, TrainConfig, TrainError, TrainSample,
     decode_samples, plot_losses, read_train_state, round_trip, train,
@@ -145,14 +146,14 @@ impl TrainArgs {
 }
 
 /// The thesis's feature-set names as aliases of feature lists.
-fn parse_features(s: &str) -> Result<Features> {
+fn parse_features(s: &str) -> Result<InputFeatures> {
     let alias = match s.trim().to_ascii_lowercase().trim_start_matches("m_") {
         "n" => Some("color"),
         "ann" => Some("albedo,normal"),
         "dsnn" => Some("diffuse,specular,normal"),
         _ => None,
     };
-    Ok(Features::parse(alias.unwrap_or(s))?)
+    Ok(InputFeatures::parse(alias.unwrap_or(s))?)
 }
 
 /// A `--arch`: a U-Net kind or the patch MLP with its activation.

@@ -270,7 +270,7 @@ pub fn claims(sweep: &str, results: &[RunResult]) -> Vec<Claim> {
                 g.better(sweep, "MAE beats MSE, which leaves splotches (§7.2, figure 7.5)", "mae", "mse", Metric::Ssim),
                 g.better(
                     sweep,
-                    "SSIM losses shift colour (insensitive to a uniform bias): the SSIM-trained model has a larger \
+                    "SSIM losses shift color (insensitive to a uniform bias): the SSIM-trained model has a larger \
                      linear error than the MAE-trained one (§7.2)",
                     "mae",
                     "ssim",
@@ -279,7 +279,7 @@ pub fn claims(sweep: &str, results: &[RunResult]) -> Vec<Claim> {
             ];
             out.push(g.better_both(
                 sweep,
-                "L_MIX fixes both: structure at least as good as MSE's, colour error at least as low as MS-SSIM's (§7.2)",
+                "L_MIX fixes both: structure at least as good as MSE's, color error at least as low as MS-SSIM's (§7.2)",
                 ("mix", "mse", Metric::Ssim),
                 ("mix", "msssim", Metric::Mae),
             ));

@@ -97,7 +97,7 @@ fn missing_venv_or_package_is_skipped_with_the_install_command() {
     nan.pixel_mut(1, 1)[0] = f32::NAN;
     let bad = [Input { color: &nan, albedo: None, normal: None }];
     let err = run_baseline(Baseline::Oidn, &bad, nowhere, 1).unwrap_err().to_string();
-    assert!(err.contains("input 0 colour") && err.contains("(x 1, y 1)"), "{err}");
+    assert!(err.contains("input 0 color") && err.contains("(x 1, y 1)"), "{err}");
     let wrong = Image::zeros(3, 3, 3);
     let bad = [Input { color: &color, albedo: Some(&wrong), normal: None }];
     assert!(run_baseline(Baseline::Oidn, &bad, nowhere, 1).unwrap_err().to_string().contains("albedo"));

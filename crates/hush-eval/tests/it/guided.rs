@@ -28,7 +28,7 @@ impl Rng {
 }
 
 /// A 64x48 scene: albedo 0.8 left of x = 32 and 0.2 right of it, smooth lighting, normals facing +z except a
-/// tilted band at the bottom. Returns (clean colour, albedo, normal).
+/// tilted band at the bottom. Returns (clean color, albedo, normal).
 fn scene() -> (Image, Image, Image) {
     let (w, h) = (64, 48);
     let albedo = Image::from_fn(w, h, 3, |x, _, c| if x < 32 { [0.8, 0.7, 0.6][c] } else { [0.2, 0.25, 0.3][c] });
@@ -59,8 +59,8 @@ fn reduces_error_on_a_synthetic_noisy_image() {
     // short of a 4x reduction would mean the weights collapse to the centre pixel.
     assert!(after < before / 4.0, "relMSE {before} -> {after}");
     // Without features it still denoises, but less well across the material edge.
-    let colour_only = guided_filter(&noisy, None, None, &GuidedParams::default()).unwrap();
-    assert!(rel_mse(&colour_only, &clean).unwrap() < before);
+    let color_only = guided_filter(&noisy, None, None, &GuidedParams::default()).unwrap();
+    assert!(rel_mse(&color_only, &clean).unwrap() < before);
 }
 
 #[test]
@@ -69,7 +69,7 @@ fn preserves_an_albedo_edge() {
     let noisy = noisy(&clean, 11);
     let params = GuidedParams::default();
     let guided = guided_filter(&noisy, Some(&albedo), Some(&normal), &params).unwrap();
-    // Mean colour of the two columns on each side of the edge (x = 31 | 32), rows 4..32 (away from the normal
+    // Mean color of the two columns on each side of the edge (x = 31 | 32), rows 4..32 (away from the normal
     // band). Noise averages over 28 rows x 3 channels: σ of that mean ≈ 0.5/√84·value ≈ 5 % of the value.
     let column_mean = |im: &Image, x: usize| (4..32).map(|y| im.pixel(x, y)[0] as f64).sum::<f64>() / 28.0;
     for x in [31, 32] {
@@ -102,7 +102,7 @@ fn non_finite_and_mismatched_input_are_clear_errors() {
         let mut c = clean.clone();
         c.pixel_mut(5, 6)[1] = bad;
         let err = guided_filter(&c, Some(&albedo), Some(&normal), &params).unwrap_err().to_string();
-        assert!(err.contains("colour") && err.contains("(x 5, y 6), channel 1"), "{err}");
+        assert!(err.contains("color") && err.contains("(x 5, y 6), channel 1"), "{err}");
         let mut n = normal.clone();
         n.pixel_mut(1, 2)[0] = bad;
         let err = guided_filter(&clean, Some(&albedo), Some(&n), &params).unwrap_err().to_string();

@@ -1,11 +1,11 @@
 use hush_dataset::Image;
-use hush_eval::pictures::{HIGH_COLOUR, LOW_COLOUR, MARK_HIGH, MARK_LOW, Rgb8, error_marks, worst_window};
+use hush_eval::pictures::{HIGH_COLOR, LOW_COLOR, MARK_HIGH, MARK_LOW, Rgb8, error_marks, worst_window};
 use hush_eval::tonemap;
 
 /// Each pixel is classified by its largest tonemapped channel difference: ≤ 3 % grey, ≤ 10 % yellow,
 /// above red; the fractions count them.
 #[test]
-fn error_marks_colour_pixels_by_threshold() {
+fn error_marks_color_pixels_by_threshold() {
     let reference = Image::from_fn(8, 4, 3, |_, _, _| 0.2);
     // A ramp of relative errors across the image, in the green channel only.
     let test =
@@ -15,15 +15,15 @@ fn error_marks_colour_pixels_by_threshold() {
     let (mut low, mut high) = (0, 0);
     for i in 0..32 {
         let off = (t.data[3 * i + 1] - r.data[3 * i + 1]).abs();
-        let colour = &picture.data[3 * i..3 * i + 3];
+        let color = &picture.data[3 * i..3 * i + 3];
         if off > MARK_HIGH {
             high += 1;
-            assert_eq!(colour, HIGH_COLOUR, "pixel {i} off by {off}");
+            assert_eq!(color, HIGH_COLOR, "pixel {i} off by {off}");
         } else if off > MARK_LOW {
             low += 1;
-            assert_eq!(colour, LOW_COLOUR, "pixel {i} off by {off}");
+            assert_eq!(color, LOW_COLOR, "pixel {i} off by {off}");
         } else {
-            assert!(colour[0] == colour[1] && colour[1] == colour[2], "pixel {i} off by {off} is grey");
+            assert!(color[0] == color[1] && color[1] == color[2], "pixel {i} off by {off} is grey");
         }
     }
     assert!(low > 0 && high > 0 && low + high < 32, "the ramp crosses both thresholds: {low} {high}");

@@ -122,9 +122,9 @@ fn a_figure_whose_file_is_missing_is_an_error_naming_it() {
     assert!(err.contains("gone.png"), "{err}");
 }
 
-/// The plots: the given size, each method in its colour, and labels (black) left of the plot area.
+/// The plots: the given size, each method in its color, and labels (black) left of the plot area.
 #[test]
-fn plots_draw_each_method_in_its_colour_and_label_the_axes() {
+fn plots_draw_each_method_in_its_color_and_label_the_axes() {
     let r = report();
     let methods = ["noisy", "hush|unet"];
     let png =
@@ -133,6 +133,6 @@ fn plots_draw_each_method_in_its_colour_and_label_the_axes() {
     assert_eq!(picture.dimensions(), (400, 300));
     let has =
         |c: (u8, u8, u8), x_max: u32| picture.enumerate_pixels().any(|(x, _, p)| x < x_max && p.0 == [c.0, c.1, c.2]);
-    assert!(has(hush_eval::colour(1), 400), "the denoiser's dot");
+    assert!(has(hush_eval::series_color(1), 400), "the denoiser's dot");
     assert!(has((0, 0, 0), 48), "the error axis labels");
 }

@@ -1,17 +1,17 @@
 use hush_net::transfer::{Transfer, pu_forward};
-use hush_net::{Feature, Features, build_input, finish_color, prepare_color};
+use hush_net::{Feature, InputFeatures, build_input, finish_color, prepare_color};
 
 #[test]
 fn features_parse_and_print() {
-    let f = Features::parse("diff,spec,nrm").unwrap();
+    let f = InputFeatures::parse("diff,spec,nrm").unwrap();
     assert_eq!(f.aux, vec![Feature::Diffuse, Feature::Specular, Feature::Normal]);
     assert_eq!(f.in_channels(), 12);
     assert_eq!(f.to_string(), "hdr,diff,spec,nrm");
-    assert_eq!(Features::parse(&f.to_string()).unwrap(), f);
-    assert_eq!(Features::parse("albedo, normal").unwrap().to_string(), "hdr,alb,nrm");
-    assert_eq!(Features::parse("").unwrap().in_channels(), 3);
-    assert!(Features::parse("alb,alb").unwrap_err().to_string().contains("twice"));
-    assert!(Features::parse("depth").unwrap_err().to_string().contains("depth"));
+    assert_eq!(InputFeatures::parse(&f.to_string()).unwrap(), f);
+    assert_eq!(InputFeatures::parse("albedo, normal").unwrap().to_string(), "hdr,alb,nrm");
+    assert_eq!(InputFeatures::parse("").unwrap().in_channels(), 3);
+    assert!(InputFeatures::parse("alb,alb").unwrap_err().to_string().contains("twice"));
+    assert!(InputFeatures::parse("depth").unwrap_err().to_string().contains("depth"));
     assert_eq!(serde_json::to_string(&f).unwrap(), r#"{"aux":["diffuse","specular","normal"]}"#);
 }
 
@@ -19,7 +19,7 @@ fn features_parse_and_print() {
 /// to [-1, 1] and mapped to [0, 1]; NaN → 0. Channels: color, then the features in order.
 #[test]
 fn build_input_prepares_each_feature_like_oidn() {
-    let features = Features::new(vec![Feature::Normal, Feature::Diffuse]).unwrap();
+    let features = InputFeatures::new(vec![Feature::Normal, Feature::Diffuse]).unwrap();
     // Two pixels (2×1).
     let color = [1.0, f32::NAN, -3.0, 1e9, 0.5, 2.0];
     let normal = [-1.0, 0.0, 1.0, 2.0, f32::NAN, -0.5];

@@ -482,11 +482,11 @@ fn stiff_inputs_give_finite_losses_and_gradients() -> Result<()> {
 #[test]
 fn non_finite_input_never_blanks_the_image() -> Result<()> {
     use candle_nn::{VarBuilder, VarMap};
-    use hush_net::{Features, ModelInfo, UNet, UNetConfig, denoise, init_weights, transfer::Transfer};
+    use hush_net::{InputFeatures, ModelInfo, UNet, UNetConfig, denoise, init_weights, transfer::Transfer};
     let (w, h) = (48, 32);
     let varmap = VarMap::new();
     let cfg = UNetConfig { width: 0.25, ..UNetConfig::oidn(3) };
-    let info = ModelInfo { net: cfg.clone().into(), features: Features::default(), transfer: Transfer::Pu };
+    let info = ModelInfo { net: cfg.clone().into(), features: InputFeatures::default(), transfer: Transfer::Pu };
     let net = UNet::new(VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu), &cfg)?;
     init_weights(&varmap, 17)?;
     let images = stiff_images(w, h);

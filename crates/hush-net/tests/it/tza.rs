@@ -4,7 +4,7 @@
 use candle_core::{DType, Device, Module, Result};
 use candle_nn::{VarBuilder, VarMap};
 use hush_net::{
-    Feature, Features, TzaTensor, UNet, UNetConfig, UNetKind, export_tza, infer_config, init_weights, load_tza,
+    Feature, InputFeatures, TzaTensor, UNet, UNetConfig, UNetKind, export_tza, infer_config, init_weights, load_tza,
     parse_tza, write_tza,
 };
 
@@ -51,11 +51,11 @@ fn official_weights_kind_and_features_are_inferred() -> Result<()> {
         assert_eq!(info.net.as_unet(), Some(net.config()));
         assert_eq!(info.features.aux, aux, "{name}");
     }
-    // Features can be given instead of inferred (a 9-channel file read as diffuse, specular).
-    let diff_spec = Features::parse("diff,spec").unwrap();
+    // InputFeatures can be given instead of inferred (a 9-channel file read as diffuse, specular).
+    let diff_spec = InputFeatures::parse("diff,spec").unwrap();
     let (_, info) = load_tza(&official("rt_hdr_alb_nrm"), Some(diff_spec.clone()), &Device::Cpu)?;
     assert_eq!(info.features, diff_spec);
-    let err = load_tza(&official("rt_hdr_alb_nrm"), Some(Features::parse("alb").unwrap()), &Device::Cpu);
+    let err = load_tza(&official("rt_hdr_alb_nrm"), Some(InputFeatures::parse("alb").unwrap()), &Device::Cpu);
     assert!(err.unwrap_err().to_string().contains("9 input channels"));
     Ok(())
 }
@@ -89,7 +89,7 @@ fn hush_weights_round_trip() -> Result<()> {
     }
     // The thesis' M1 (⌊c·0.66⌋) is recognized from its shapes too.
     let (_, m1) = hush_net(UNetKind::Unet, 12, 0.66, 13)?;
-    let (_, info) = load_tza(&export_tza(&m1)?, Some(Features::parse("diff,spec,nrm").unwrap()), &Device::Cpu)?;
+    let (_, info) = load_tza(&export_tza(&m1)?, Some(InputFeatures::parse("diff,spec,nrm").unwrap()), &Device::Cpu)?;
     assert_eq!(info.net.as_unet().map(|c| c.conv_shapes()), Some(m1.config().conv_shapes()));
     Ok(())
 }

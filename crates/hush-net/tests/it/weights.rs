@@ -2,14 +2,14 @@ use candle_core::{DType, Device, Module, Result};
 use candle_nn::{VarBuilder, VarMap};
 use hush_net::transfer::Transfer;
 use hush_net::{
-    Activation, Features, ModelInfo, Net, PatchMlpConfig, UNet, UNetConfig, UNetKind, init_weights, load_model,
+    Activation, InputFeatures, ModelInfo, Net, PatchMlpConfig, UNet, UNetConfig, UNetKind, init_weights, load_model,
     load_weights, read_metadata, save_weights,
 };
 
 use crate::{det_tensor, max_abs_diff};
 
 fn info(width: f64) -> ModelInfo {
-    let features = Features::parse("alb,nrm").unwrap();
+    let features = InputFeatures::parse("alb,nrm").unwrap();
     let net = UNetConfig { kind: UNetKind::Unet, in_channels: features.in_channels(), out_channels: 3, width };
     ModelInfo { net: net.into(), features, transfer: Transfer::Pu }
 }
@@ -94,7 +94,7 @@ fn mismatches_are_clear_errors() -> Result<()> {
 /// rebuilt network gives bit-identical outputs on an image whose size is not a multiple of the stride.
 #[test]
 fn patch_mlp_round_trip() -> Result<()> {
-    let features = Features::parse("alb,nrm").unwrap();
+    let features = InputFeatures::parse("alb,nrm").unwrap();
     let cfg = PatchMlpConfig::burger(features.in_channels(), 0.01, Activation::Tanh);
     let info = ModelInfo { net: cfg.clone().into(), features, transfer: Transfer::Pu };
     let varmap = VarMap::new();

@@ -121,7 +121,7 @@ fn gltf_node_hierarchy_camera_and_textured_plastic() {
         panic!("{:?}", m.material)
     };
     assert!((alpha - 0.25).abs() < 1e-6);
-    // The base colour factor multiplies the (linearized) texture.
+    // The base color factor multiplies the (linearized) texture.
     let t = s.textures[id.0 as usize].texel(0, 0);
     assert!((t - Vec3::new(0.5, 1.0, 1.0) * 0.21586).abs().max_element() < 1e-4, "{t}");
 }

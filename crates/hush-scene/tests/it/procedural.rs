@@ -6,7 +6,7 @@ use std::path::Path;
 
 use hush_scene::Scene;
 use hush_scene::procedural::{
-    Features, GENERATOR_VERSION, GeneratedScene, GeneratorOptions, LightKind, MaterialClass, generate,
+    GENERATOR_VERSION, GeneratedScene, GeneratorOptions, Ingredients, LightKind, MaterialClass, generate,
 };
 
 use crate::{scratch, shared};
@@ -46,7 +46,7 @@ fn check_round_trip(dir: &Path, g: &GeneratedScene) -> Scene {
 #[test]
 fn generated_scenes_load_back_as_generated() {
     let dir = scratch("procedural");
-    let options = GeneratorOptions { features: Features::BASIC, width: 40, height: 30, ..Default::default() };
+    let options = GeneratorOptions { ingredients: Ingredients::BASIC, width: 40, height: 30, ..Default::default() };
     let mut styles = BTreeSet::new();
     let mut classes = BTreeSet::new();
     for seed in 0..40u64 {
@@ -77,7 +77,7 @@ fn generated_scenes_load_back_as_generated() {
 #[test]
 fn all_features_load_back_too() {
     let dir = scratch("procedural-all");
-    let options = GeneratorOptions { features: Features::ALL, width: 32, height: 32, ..Default::default() };
+    let options = GeneratorOptions { ingredients: Ingredients::ALL, width: 32, height: 32, ..Default::default() };
     let mut kinds = BTreeSet::new();
     let mut lights = BTreeSet::new();
     for seed in 0..40u64 {
@@ -97,7 +97,7 @@ fn all_features_load_back_too() {
 
 #[test]
 fn same_seed_same_bytes_other_seed_other_scene() {
-    let options = GeneratorOptions { features: Features::ALL, ..Default::default() };
+    let options = GeneratorOptions { ingredients: Ingredients::ALL, ..Default::default() };
     let (a, b, c) = (generate(7, &options), generate(7, &options), generate(8, &options));
     assert_eq!(a.xml, b.xml);
     assert_eq!(a.assets, b.assets);
@@ -120,11 +120,11 @@ fn meshes_are_borrowed_from_shared_scenes() {
 
 #[test]
 fn feature_names_parse_and_unknown_ones_are_errors() {
-    assert_eq!(Features::parse("default"), Ok(Features::KERNEL));
-    assert_eq!(Features::parse("all"), Ok(Features::ALL));
-    let f = Features::parse("textures,environment").unwrap();
+    assert_eq!(Ingredients::parse("default"), Ok(Ingredients::KERNEL));
+    assert_eq!(Ingredients::parse("all"), Ok(Ingredients::ALL));
+    let f = Ingredients::parse("textures,environment").unwrap();
     assert!(f.textures && f.environment && !f.rough_plastic);
-    assert_eq!(Features::parse(&f.describe()), Ok(f));
-    let err = Features::parse("textures,sparkles").unwrap_err();
+    assert_eq!(Ingredients::parse(&f.describe()), Ok(f));
+    let err = Ingredients::parse("textures,sparkles").unwrap_err();
     assert!(err.contains("sparkles") && err.contains("roughdielectric"), "{err}");
 }

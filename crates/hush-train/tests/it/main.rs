@@ -9,7 +9,7 @@ use std::ops::ControlFlow;
 use candle_core::Device;
 use hush_dataset::Image;
 use hush_net::transfer::{Transfer, autoexposure};
-use hush_net::{Activation, Features, PatchMlpConfig, UNetConfig, UNetKind, load_model, prepare_color};
+use hush_net::{Activation, InputFeatures, PatchMlpConfig, UNetConfig, UNetKind, load_model, prepare_color};
 use hush_train::{
     Augment, EpochRow, OptimizerConfig, Schedule, TrainConfig, TrainError, TrainSample, Trained, plot_losses,
     read_train_state, train,
@@ -40,7 +40,7 @@ fn synthetic(n: usize) -> Vec<TrainSample> {
 }
 
 fn config(steps: usize) -> TrainConfig {
-    let mut cfg = TrainConfig::thesis(Features::default());
+    let mut cfg = TrainConfig::thesis(InputFeatures::default());
     cfg.net = UNetConfig { kind: UNetKind::Unet, in_channels: 3, out_channels: 3, width: 0.25 }.into();
     cfg.steps = steps;
     cfg.batch = 4;
@@ -119,7 +119,7 @@ fn same_seed_same_losses() {
 /// RAYON_NUM_THREADS=1 against 2, which also agree bit for bit.
 #[test]
 fn same_seed_same_losses_at_the_default_configuration() {
-    let features = Features::parse("color,albedo,normal").unwrap();
+    let features = InputFeatures::parse("color,albedo,normal").unwrap();
     let samples: Vec<TrainSample> = (0..2)
         .map(|k| {
             let target =
@@ -261,7 +261,7 @@ fn resume_refuses_another_run() {
     assert!(err.contains("cannot resume") && err.contains("width 0.25") && err.contains("width 0.5"), "{err}");
 
     let mut with_normals = cfg.clone();
-    with_normals.features = Features::parse("nrm").unwrap();
+    with_normals.features = InputFeatures::parse("nrm").unwrap();
     with_normals.net = cfg.net.with_in_channels(6);
     let normal = Image::from_fn(32, 32, 3, |_, _, c| if c == 2 { 1.0 } else { 0.0 });
     let six: Vec<TrainSample> = samples
@@ -326,7 +326,7 @@ fn bad_configurations_and_data_are_refused() {
     cfg.crop = 48;
     assert!(run(&cfg, &samples).unwrap_err().to_string().contains("smaller than the 48x48 crop"));
     let mut cfg = config(2);
-    cfg.features = Features::parse("alb").unwrap();
+    cfg.features = InputFeatures::parse("alb").unwrap();
     assert!(run(&cfg, &samples).unwrap_err().to_string().contains("input channels"));
     cfg.net = cfg.net.with_in_channels(6);
     assert!(run(&cfg, &samples).unwrap_err().to_string().contains("training sample 0: input has 3 channels"));
@@ -344,7 +344,7 @@ fn samples_from_linear_images_share_the_reference_exposure() {
     let color =
         Image::from_fn(16, 16, 3, |x, y, c| if (x + y) % 2 == 0 { 0.0 } else { 2.0 * (3.0 + x as f32 + c as f32) });
     let normal = Image::from_fn(16, 16, 3, |_, _, c| if c == 2 { 1.0 } else { 0.0 });
-    let features = Features::parse("nrm").unwrap();
+    let features = InputFeatures::parse("nrm").unwrap();
     let s = TrainSample::from_linear(&features, Transfer::Pu, &color, &[&normal], &reference).unwrap();
     let exposure = autoexposure(&reference.data, 16, 16);
     assert_eq!(s.target.data, prepare_color(&reference.data, exposure, Transfer::Pu));
