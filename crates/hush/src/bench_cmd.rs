@@ -16,7 +16,7 @@ use clap::{Args, Subcommand};
 use hush_net::{InputFeatures, Loss, ModelInfo, Net, UNetConfig, UNetKind, init_weights, transfer::Transfer};
 use hush_train::{Optimizer, OptimizerConfig};
 
-use crate::cpu::{cpu_seconds, peak_rss_bytes};
+use hush_pipeline::process::{cpu_seconds, peak_rss_bytes};
 
 #[derive(Args, Debug)]
 pub struct BenchArgs {
@@ -112,7 +112,7 @@ fn threads() -> serde_json::Value {
 }
 
 pub fn run(args: BenchArgs) -> Result<()> {
-    let device = crate::denoiser::device()?;
+    let device = hush_pipeline::device(None)?;
     let json = match args.what {
         BenchWhat::Inference(a) => inference(&a, &device)?,
         BenchWhat::TrainStep(a) => train_step(&a, &device)?,

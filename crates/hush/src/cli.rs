@@ -2,10 +2,12 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
 
+use hush_pipeline::{EvalPlan, TrainOptions, ViewOverrides};
+use hush_scene::procedural::{GeneratorOptions, Ingredients};
+
 pub use crate::bench_cmd::BenchArgs;
 pub use crate::dataset_cmd::DatasetArgs;
 pub use crate::scene_cmd::SceneArgs;
-pub use crate::train_cmd::TrainArgs;
 
 #[derive(Parser, Debug)]
 #[command(
@@ -30,7 +32,7 @@ pub enum Command {
     /// Generate procedural scenes.
     Scene(SceneArgs),
     /// Train a denoising U-Net on a dataset's training split.
-    Train(TrainArgs),
+    Train(TrainOptions),
     /// Denoise one image with a trained model.
     Denoise(DenoiseArgs),
     /// Evaluate models and baselines against the noisy input on a dataset's test split: metrics, error
@@ -41,9 +43,9 @@ pub enum Command {
     Bench(BenchArgs),
 }
 
-/// Camera and image overrides shared by `render` and `dataset`.
+/// Camera and image overrides of `render`.
 #[derive(Args, Debug, Clone, Default)]
-pub struct ViewOverrides {
+pub struct ViewArgs {
     /// Image width in pixels (overrides the scene file).
     #[arg(long)]
     pub width: Option<u32>,
@@ -67,6 +69,39 @@ pub struct ViewOverrides {
     pub max_depth: Option<u32>,
 }
 
+impl ViewArgs {
+    pub fn overrides(&self) -> ViewOverrides {
+        ViewOverrides {
+            width: self.width,
+            height: self.height,
+            fov: self.fov,
+            origin: self.origin,
+            target: self.target,
+            up: self.up,
+            max_depth: self.max_depth,
+        }
+    }
+}
+
+/// Generator options shared by `scene generate` and `dataset --procedural`.
+#[derive(Args, Debug, Clone)]
+pub struct GeneratorArgs {
+    /// What the generator may use: `default` (what the path tracer renders today), `all` (adds rough glass,
+    /// rough plastic, textures and environment lights), or a list of roughdielectric, roughplastic, textures,
+    /// environment.
+    #[arg(long, default_value = "default", value_parser = Ingredients::parse)]
+    pub ingredients: Ingredients,
+    /// Place small OBJ meshes found below DIR/*/models/ (e.g. ../shared/scenes) as furniture, by path.
+    #[arg(long, value_name = "DIR")]
+    pub borrow_meshes: Option<PathBuf>,
+}
+
+impl GeneratorArgs {
+    pub fn options(&self, width: u32, height: u32) -> GeneratorOptions {
+        GeneratorOptions { ingredients: self.ingredients, width, height, borrow_meshes: self.borrow_meshes.clone() }
+    }
+}
+
 #[derive(Args, Debug)]
 pub struct RenderArgs {
     /// Scene file (Mitsuba XML).
@@ -83,7 +118,7 @@ pub struct RenderArgs {
     #[arg(long)]
     pub out: PathBuf,
     #[command(flatten)]
-    pub view: ViewOverrides,
+    pub view: ViewArgs,
     /// Random seed: the same seed gives the same image.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -140,8 +175,21 @@ pub struct EvalArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// Denoise timing: median of this many warm runs.
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = EvalPlan::DEFAULT_TIMING_RUNS)]
     pub timing_runs: usize,
+}
+
+impl EvalArgs {
+    pub fn plan(self) -> EvalPlan {
+        EvalPlan {
+            dataset: self.dataset,
+            models: self.models,
+            baselines: self.baselines,
+            spp: self.spp,
+            out: self.out,
+            timing_runs: self.timing_runs,
+        }
+    }
 }
 
 fn parse_vec3(s: &str) -> Result<[f32; 3], String> {

@@ -1,9 +1,12 @@
+//! `hush denoise`: one image through a trained model (or OIDN's weights), its features from the flags or
+//! from the layers of a `hush render` EXR.
+
 use anyhow::{Context, Result, bail};
 use hush_dataset::{Image, read_exr, read_rgb, write_rgb};
 use hush_net::Feature;
+use hush_pipeline::Denoiser;
 
 use crate::cli::DenoiseArgs;
-use crate::denoiser::Denoiser;
 
 /// The layer of a `hush render` EXR that holds a feature.
 fn layer_name(f: Feature) -> &'static str {

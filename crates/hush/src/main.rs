@@ -1,20 +1,43 @@
-//! `hush`: render scenes, build datasets, train denoisers, denoise images and evaluate them.
+//! `hush`: render scenes, build datasets, train denoisers, denoise images and evaluate them. A thin shell over
+//! hush-pipeline: each `*_cmd.rs` turns its arguments into a plan, runs it and prints what it did.
 
 mod bench_cmd;
 mod cli;
-mod cpu;
 mod dataset_cmd;
 mod denoise_cmd;
-mod denoiser;
 mod eval_cmd;
+mod progress;
 mod render_cmd;
 mod scene_cmd;
 mod train_cmd;
 
 use clap::Parser;
+use hush_trace::GpuContext;
+
+/// Opens the GPU and says which adapter it is, so a fallback is never silent.
+fn open_gpu() -> anyhow::Result<GpuContext> {
+    let gpu = GpuContext::new()?;
+    eprintln!("adapter: {}", gpu.describe());
+    Ok(gpu)
+}
+
+/// Turns off Mesa's device-selection layer, an implicit Vulkan layer that asks the window system for the
+/// default GPU: on a machine without a display, libwayland then prints "error: XDG_RUNTIME_DIR is invalid or
+/// not set in the environment." twice, which reads as a failure. hush never draws to a window and picks its
+/// adapter itself (`HUSH_ADAPTER`), so the layer has nothing to do. Left alone when the user set
+/// `NODEVICE_SELECT` or chose a device through the layer (`MESA_VK_DEVICE_SELECT`).
+#[allow(unsafe_code)]
+fn quiet_device_select_layer() {
+    if std::env::var_os("NODEVICE_SELECT").is_none() && std::env::var_os("MESA_VK_DEVICE_SELECT").is_none() {
+        // SAFETY: called first thing in main, before any other thread exists, so nothing reads the
+        // environment concurrently.
+        unsafe { std::env::set_var("NODEVICE_SELECT", "1") };
+    }
+}
 
 fn main() {
-    cpu::keep_freed_memory();
+    quiet_device_select_layer();
+    hush_pipeline::process::keep_freed_memory();
     let cli = cli::Cli::parse();
     let result = match cli.command {
         cli::Command::Render(args) => render_cmd::run(args),

@@ -1,18 +1,15 @@
-//! `hush scene generate`: a seeded procedural scene (hush-scene's generator), written atomically with
+//! `hush scene generate`: a seeded procedural scene (hush-pipeline's `procedural`), written atomically with
 //! its assets and probed on the GPU, so that no scene whose camera sees nothing lit is ever written.
 
-use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
-use hush_dataset::{luminance, write_atomic};
-use hush_scene::Scene;
-use hush_scene::procedural::{self, GENERATOR_VERSION, GeneratedScene, GeneratorOptions, Ingredients, MaterialClass};
-use hush_trace::{RenderSettings, Renderer};
+use hush_dataset::write_atomic;
+use hush_pipeline::procedural::{generate_into, summary_json};
+use hush_trace::Renderer;
 
-use crate::dataset_cmd::{MIN_LIT_FRACTION, PROBE_SIZE, PROBE_SPP};
-use crate::render_cmd::open_gpu;
+use crate::cli::GeneratorArgs;
 
 #[derive(Args, Debug)]
 pub struct SceneArgs {
@@ -45,157 +42,6 @@ pub struct GenerateArgs {
     pub no_probe: bool,
 }
 
-/// Generator options shared by `scene generate` and `dataset --procedural`.
-#[derive(Args, Debug, Clone)]
-pub struct GeneratorArgs {
-    /// What the generator may use: `default` (what the path tracer renders today), `all` (adds rough glass,
-    /// rough plastic, textures and environment lights), or a list of roughdielectric, roughplastic, textures,
-    /// environment.
-    #[arg(long, default_value = "default", value_parser = Ingredients::parse)]
-    pub ingredients: Ingredients,
-    /// Place small OBJ meshes found below DIR/*/models/ (e.g. ../shared/scenes) as furniture, by path.
-    #[arg(long, value_name = "DIR")]
-    pub borrow_meshes: Option<PathBuf>,
-}
-
-impl GeneratorArgs {
-    pub fn options(&self, width: u32, height: u32) -> GeneratorOptions {
-        GeneratorOptions { ingredients: self.ingredients, width, height, borrow_meshes: self.borrow_meshes.clone() }
-    }
-}
-
-/// A written procedural scene.
-#[derive(Debug)]
-pub struct Written {
-    pub scene: GeneratedScene,
-    /// The attempt kept (attempts after the first follow rejected scenes).
-    pub attempt: u32,
-    /// Fraction of the probe's pixels that received light (`None` without a probe).
-    pub lit_fraction: Option<f64>,
-}
-
-/// Seed of the probe renders ("PROBE").
-const PROBE_SEED: u64 = 0x0050_524f_4245;
-
-/// Attempts per scene before giving up (each is a different scene drawn from the same seed).
-const MAX_ATTEMPTS: u32 = 8;
-
-/// The fraction of pixels of a small, cheap render of `scene` that receive any light.
-pub fn lit_fraction(renderer: &Renderer, scene: &Scene, seed: u64) -> Result<f64> {
-    let mut probe = scene.clone();
-    let film = scene.film;
-    let scale = PROBE_SIZE as f32 / film.width.max(film.height) as f32;
-    if scale < 1.0 {
-        probe.film.width = ((film.width as f32 * scale).round() as u32).max(1);
-        probe.film.height = ((film.height as f32 * scale).round() as u32).max(1);
-    }
-    let out = renderer.render(&probe, &RenderSettings { spp: PROBE_SPP, seed }, &mut |_, _| {})?;
-    let lit = out.color.data.chunks_exact(3).filter(|p| luminance(p) > 0.0).count();
-    Ok(lit as f64 / (probe.film.width as f64 * probe.film.height as f64))
-}
-
-/// Generates scene `index` of a run seeded with `seed` into `xml` (with its assets beside it): attempts are
-/// drawn until one loads without a warning and, with a renderer, its probe finds at least half of the
-/// pixels lit. The scene file is written last, so an existing one is always complete.
-pub fn generate_into(
-    xml: &Path,
-    seed: u64,
-    index: u64,
-    options: &GeneratorOptions,
-    renderer: Option<&Renderer>,
-) -> Result<Written> {
-    first_lit(xml, options.ingredients, renderer, |attempt| {
-        procedural::generate(procedural::scene_seed(seed, index, attempt as u64), options)
-    })
-    .with_context(|| format!("procedural scene {index} of seed {seed}"))
-}
-
-/// Writes the first of the scenes `draw(0)`, `draw(1)`, … that loads without a warning and (with a renderer)
-/// whose probe finds at least half of its pixels lit; the assets of rejected attempts are removed.
-fn first_lit(
-    xml: &Path,
-    ingredients: Ingredients,
-    renderer: Option<&Renderer>,
-    mut draw: impl FnMut(u32) -> GeneratedScene,
-) -> Result<Written> {
-    let dir = xml.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let mut stale: Vec<String> = Vec::new();
-    let mut best: Option<(f64, u32)> = None;
-    for attempt in 0..MAX_ATTEMPTS {
-        let g = draw(attempt);
-        for a in &g.assets {
-            let path = dir.join(&a.file);
-            write_atomic(&path, |tmp| std::fs::write(tmp, &a.bytes))
-                .with_context(|| format!("writing {}", path.display()))?;
-        }
-        let scene = Scene::from_mitsuba_str(&g.xml, xml)
-            .with_context(|| format!("the generated scene (attempt {attempt}) does not load: a generator bug"))?;
-        if !scene.warnings.is_empty() {
-            bail!("the generated scene (attempt {attempt}) loads with warnings: {:?}", scene.warnings);
-        }
-        let lit = match renderer {
-            None => None,
-            Some(r) => Some(lit_fraction(r, &scene, PROBE_SEED ^ attempt as u64).with_context(|| {
-                format!(
-                    "probing the generated scene (ingredients {}): the path tracer cannot render it; \
-                     generate with --ingredients default, or with --no-probe to write it anyway",
-                    ingredients.describe()
-                )
-            })?),
-        };
-        if let Some(f) = lit.filter(|f| *f < MIN_LIT_FRACTION) {
-            best = best.filter(|b| b.0 >= f).or(Some((f, attempt)));
-            stale.extend(g.assets.iter().map(|a| a.file.clone()));
-            continue;
-        }
-        write_atomic(xml, |tmp| std::fs::write(tmp, &g.xml)).with_context(|| format!("writing {}", xml.display()))?;
-        remove_stale(dir, &stale, &g.assets);
-        return Ok(Written { scene: g, attempt, lit_fraction: lit });
-    }
-    remove_stale(dir, &stale, &[]);
-    let (f, attempt) = best.unwrap_or((0.0, 0));
-    bail!(
-        "no attempt had {:.0} % of its probe pixels lit in {MAX_ATTEMPTS} attempts (best: attempt {attempt}, \
-         {:.0} %): try another seed",
-        MIN_LIT_FRACTION * 100.0,
-        f * 100.0
-    )
-}
-
-/// Removes the assets of rejected attempts that the kept scene does not use.
-fn remove_stale(dir: &Path, stale: &[String], kept: &[procedural::Asset]) {
-    for file in stale.iter().filter(|f| !kept.iter().any(|a| &a.file == *f)) {
-        let _ = std::fs::remove_file(dir.join(file));
-    }
-}
-
-/// What a generated scene holds, as JSON (for `--summary` and the dataset manifest's checks).
-pub fn summary_json(w: &Written, seed: u64, index: u64, options: &GeneratorOptions) -> serde_json::Value {
-    let mut classes: BTreeMap<&str, usize> = MaterialClass::ALL.iter().map(|c| (c.name(), 0)).collect();
-    for c in w.scene.material_classes() {
-        *classes.entry(c.name()).or_default() += 1;
-    }
-    let mut bsdfs: BTreeMap<&str, usize> = BTreeMap::new();
-    for s in w.scene.shapes.iter().filter(|s| !s.emitter) {
-        *bsdfs.entry(s.bsdf).or_default() += 1;
-    }
-    serde_json::json!({
-        "generator_version": GENERATOR_VERSION,
-        "seed": seed,
-        "index": index,
-        "attempt": w.attempt,
-        "scene_seed": w.scene.seed,
-        "features": options.ingredients.describe(),
-        "style": w.scene.style,
-        "shapes": w.scene.shapes.len(),
-        "materials": classes,
-        "bsdfs": bsdfs,
-        "lights": w.scene.lights.iter().map(|l| l.name()).collect::<Vec<_>>(),
-        "probe_lit_fraction": w.lit_fraction,
-    })
-}
-
 pub fn run(args: SceneArgs) -> Result<()> {
     match args.action {
         SceneAction::Generate(a) => generate(a),
@@ -207,7 +53,7 @@ fn generate(args: GenerateArgs) -> Result<()> {
         bail!("--out {}: the scene is Mitsuba XML; name the file *.xml", args.out.display());
     }
     let options = args.generator.options(256, 256);
-    let gpu = if args.no_probe { None } else { Some(open_gpu()?) };
+    let gpu = if args.no_probe { None } else { Some(crate::open_gpu()?) };
     let renderer = gpu.as_ref().map(Renderer::new).transpose()?;
     let written = generate_into(&args.out, args.seed, 0, &options, renderer.as_ref())?;
     let s = summary_json(&written, args.seed, 0, &options);
@@ -226,51 +72,4 @@ fn generate(args: GenerateArgs) -> Result<()> {
             .with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use hush_scene::procedural::{self, GeneratorOptions};
-    use hush_trace::{GpuContext, Renderer};
-
-    use super::first_lit;
-
-    /// The XML without its area emitters (the generator writes each on one line, inside its shape).
-    fn without_emitters(xml: &str) -> String {
-        let mut out = xml.to_string();
-        while let Some(i) = out.find("<emitter type=\"area\">") {
-            let end = i + out[i..].find("</emitter>").expect("closed emitter") + "</emitter>".len();
-            out.replace_range(i..end, "");
-        }
-        out
-    }
-
-    /// A scene whose camera sees nothing lit is never written: an attempt without lights is rejected by the
-    /// probe and the next one is kept; when every attempt is unlit, nothing is written and the error says why.
-    #[test]
-    fn unlit_scenes_are_rejected() {
-        let gpu = GpuContext::new().expect("a Vulkan adapter (lavapipe: apt-get install mesa-vulkan-drivers)");
-        let renderer = Renderer::new(&gpu).unwrap();
-        let options = GeneratorOptions { width: 32, height: 32, ..Default::default() };
-        let lit = procedural::generate(1, &options);
-        let mut dark = lit.clone();
-        dark.xml = without_emitters(&lit.xml);
-        assert!(!dark.xml.contains("<emitter") && dark.xml.len() < lit.xml.len());
-        let dir = std::env::temp_dir().join(format!("hush-unlit-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-
-        let xml = dir.join("a/scene.xml");
-        let w =
-            first_lit(&xml, options.ingredients, Some(&renderer), |a| if a == 0 { dark.clone() } else { lit.clone() })
-                .unwrap();
-        assert_eq!(w.attempt, 1);
-        assert!(w.lit_fraction.unwrap() >= super::MIN_LIT_FRACTION);
-        assert_eq!(std::fs::read_to_string(&xml).unwrap(), lit.xml);
-
-        let xml = dir.join("b/scene.xml");
-        let err = first_lit(&xml, options.ingredients, Some(&renderer), |_| dark.clone()).unwrap_err().to_string();
-        assert!(err.contains("probe pixels lit") && err.contains("best: attempt 0, 0 %"), "{err}");
-        assert!(!xml.exists() && !dir.join("b/cylinder.obj").exists());
-        let _ = std::fs::remove_dir_all(&dir);
-    }
 }

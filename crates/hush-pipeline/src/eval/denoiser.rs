@@ -1,9 +1,8 @@
-//! A trained model loaded from its file, applied to images.
+//! A trained model loaded from its file, applied to images: what `hush denoise` and the evaluation run.
 
 use std::path::Path;
 
 use anyhow::{Context, Result, bail};
-use candle_core::Device;
 use hush_dataset::Image;
 use hush_net::{Feature, ModelInfo, Net, load_model, load_tza};
 
@@ -17,15 +16,8 @@ pub fn aux_of(view: &hush_dataset::ViewImages, f: Feature) -> &Image {
     }
 }
 
-/// The device Candle runs on: the first CUDA device when built with `cuda`, else the CPU.
-pub fn device() -> Result<Device> {
-    #[cfg(feature = "cuda")]
-    let device = Device::new_cuda(0)?;
-    #[cfg(not(feature = "cuda"))]
-    let device = Device::Cpu;
-    Ok(device)
-}
-
+/// A trained model (a hush model or OIDN weights) and what it expects.
+#[derive(Debug)]
 pub struct Denoiser {
     net: Net,
     pub info: ModelInfo,
@@ -38,7 +30,7 @@ impl Denoiser {
     /// shapes.
     pub fn load(path: &Path) -> Result<Denoiser> {
         let bytes = std::fs::read(path).with_context(|| format!("reading model {}", path.display()))?;
-        let device = device()?;
+        let device = crate::device(None)?;
         let is_tza = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("tza"));
         let loaded = if is_tza {
             load_tza(&bytes, None, &device).map(|(net, info)| (Net::from(net), info))

@@ -1,0 +1,331 @@
+//! One view of a dataset: its camera (the scene's own, or a generated one that the probe accepts), the noisy
+//! images along the spp ladder, the clean features and the reference, each kept when a previous run left it
+//! finished and valid.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use glam::{Quat, Vec3};
+use hush_dataset::{
+    AuxKind, AuxRecord, CameraRecord, FireflyRecord, Layout, Manifest, PendingView, ProbeRecord, ReferenceCheck,
+    ReferenceRecord, RenderRecord, Split, ViewGeneration, check_image, despeckle, link_or_copy, read_rgb, write_rgb,
+};
+use hush_hash::SplitMix64;
+use hush_scene::{Camera, Scene};
+use hush_trace::{RenderOutput, RenderSettings, Renderer};
+
+use super::DatasetPlan;
+use super::scenes::JobScene;
+use crate::Observer;
+use crate::probe::{MAX_ATTEMPTS, MIN_LIT_FRACTION, PROBE_SEED, PROBE_SPP, lit_fraction, probe_size};
+
+/// A seed for one render, derived from the dataset seed and what is rendered, so that every
+/// image (and the reference in particular) is statistically independent of every other.
+pub fn render_seed(seed: u64, scene: &str, view: u32, what: &str) -> u64 {
+    let mut h = SplitMix64(seed);
+    let mut acc = h.next_u64();
+    for b in scene.bytes().chain([0xff]).chain(what.bytes()) {
+        acc = SplitMix64(acc ^ b as u64).next_u64();
+    }
+    SplitMix64(acc ^ view as u64).next_u64()
+}
+
+/// A candidate camera: it orbits the scene camera's target by up to ±20° of yaw and ±8° of pitch, moves
+/// 10 % closer or farther, shifts the target by up to 3 % of the scene's size and scales the field of view
+/// by ±10 %.
+pub fn jitter_camera(base: &Camera, scene: &Scene, seed: u64) -> Camera {
+    let mut rng = SplitMix64(seed);
+    let (forward, right, up) = base.basis();
+    let yaw = Quat::from_axis_angle(up, rng.uniform(-20.0, 20.0).to_radians());
+    let pitch = Quat::from_axis_angle(right, rng.uniform(-8.0, 8.0).to_radians());
+    let (lo, hi) = scene.bounds();
+    let size = if lo.is_finite() && hi.is_finite() { (hi - lo).length() } else { 1.0 };
+    let shift = Vec3::new(rng.uniform(-1.0, 1.0), rng.uniform(-1.0, 1.0), rng.uniform(-1.0, 1.0)) * 0.03 * size;
+    let target = base.target + shift;
+    let dist = (base.origin - base.target).length() * rng.uniform(0.9, 1.1);
+    let dir = (yaw * pitch * forward).normalize();
+    Camera {
+        origin: target - dir * dist,
+        target,
+        up: base.up,
+        fov_y_deg: (base.fov_y_deg * rng.uniform(0.9, 1.1)).min(170.0),
+    }
+}
+
+pub(crate) fn camera_record(camera: &Camera, scene: &Scene) -> CameraRecord {
+    CameraRecord {
+        origin: camera.origin.to_array(),
+        target: camera.target.to_array(),
+        up: camera.up.to_array(),
+        fov_y_deg: camera.fov_y_deg,
+        width: scene.film.width,
+        height: scene.film.height,
+    }
+}
+
+pub(crate) fn camera_of(r: &CameraRecord) -> Camera {
+    Camera { origin: r.origin.into(), target: r.target.into(), up: r.up.into(), fov_y_deg: r.fov_y_deg }
+}
+
+/// What every view needs while it renders.
+pub(crate) struct Ctx<'a> {
+    pub(crate) plan: &'a DatasetPlan,
+    pub(crate) layout: Layout,
+    pub(crate) renderer: &'a Renderer<'a>,
+    pub(crate) observer: &'a dyn Observer,
+    /// This run's manifest (the whole dataset's, or a shard's part) and where it is saved.
+    pub(crate) own: Manifest,
+    pub(crate) own_path: PathBuf,
+    /// Images rendered (not kept) so far, and images finished or kept.
+    pub(crate) rendered: usize,
+    pub(crate) done: u64,
+    pub(crate) message: String,
+}
+
+impl Ctx<'_> {
+    /// Renders, telling the observer how far it is.
+    fn render(&self, scene: &Scene, spp: u32, seed: u64, label: &str) -> Result<RenderOutput> {
+        let mut progress = self.observer.render(label, spp);
+        let pixels = scene.film.width as f64 * scene.film.height as f64;
+        let start = std::time::Instant::now();
+        let out = self.renderer.render(scene, &RenderSettings { spp, seed }, &mut |done, _| {
+            let rate = pixels * done as f64 / start.elapsed().as_secs_f64().max(1e-9) / 1e6;
+            progress.update(done, rate);
+        });
+        drop(progress);
+        let out = out?;
+        if out.discarded_samples > 0 {
+            self.note(format!("warning: {label}: {} non-finite path samples were discarded", out.discarded_samples));
+        }
+        Ok(out)
+    }
+
+    fn note(&self, line: String) {
+        self.observer.note(&line);
+    }
+
+    /// One more image of the job is finished or kept.
+    fn advance(&mut self) {
+        self.done += 1;
+        self.observer.progress(self.done, &self.message);
+    }
+
+    /// Stores what is finished of a view in this run's manifest file at once, so a killed run keeps it.
+    fn record(&mut self, progress: &PendingView) -> Result<()> {
+        self.own.upsert_progress(progress.clone())?;
+        self.own.save_file(&self.own_path)?;
+        Ok(())
+    }
+
+    /// Whether `file` is a finished image of the camera's size (readable, finite).
+    fn valid(&self, file: &str, camera: &CameraRecord) -> bool {
+        check_image(&self.layout.path(file), camera.width as usize, camera.height as usize).is_ok()
+    }
+}
+
+/// Picks the camera of a generated view: candidates are drawn from the view's seed until a cheap probe
+/// render shows that at least half of the image receives light; after `MAX_ATTEMPTS` the best is kept.
+fn generate_view(ctx: &Ctx, job: &JobScene, v: u32) -> Result<(Camera, ViewGeneration)> {
+    let seed = render_seed(ctx.plan.seed, &job.name, v, "camera");
+    let (pw, ph) = probe_size(&job.scene.film);
+    let mut best: Option<(f64, Camera, u32)> = None;
+    for attempt in 0..MAX_ATTEMPTS {
+        let camera = jitter_camera(&job.scene.camera, &job.scene, seed.wrapping_add(attempt as u64));
+        if camera.validate().is_err() {
+            continue;
+        }
+        let mut probe = job.scene.clone();
+        probe.camera = camera;
+        let fraction = lit_fraction(ctx.renderer, &probe, seed ^ PROBE_SEED ^ attempt as u64)?;
+        if best.as_ref().is_none_or(|b| fraction > b.0) {
+            best = Some((fraction, camera, attempt));
+        }
+        if fraction >= MIN_LIT_FRACTION {
+            break;
+        }
+    }
+    let (fraction, camera, attempt) =
+        best.with_context(|| format!("{}: no valid camera among {MAX_ATTEMPTS} candidates", job.path.display()))?;
+    let accepted = fraction >= MIN_LIT_FRACTION;
+    if !accepted {
+        ctx.note(format!(
+            "warning: {} v{v:03}: no candidate view had {:.0} % of its pixels lit; keeping the best ({:.0} %)",
+            job.name,
+            MIN_LIT_FRACTION * 100.0,
+            fraction * 100.0
+        ));
+    }
+    let probe = ProbeRecord { width: pw, height: ph, spp: PROBE_SPP, lit_fraction: fraction, accepted };
+    Ok((camera, ViewGeneration { kind: "generated".into(), seed, attempt, probe: Some(probe) }))
+}
+
+/// Renders (or keeps) every image of one view.
+pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u32, split: Split) -> Result<()> {
+    let plan = ctx.plan;
+    let name = job.name.as_str();
+    let view = format!("v{v:03}");
+    let label = format!("{name} {view}");
+    let size = (job.scene.film.width, job.scene.film.height);
+    let previous = known
+        .progress(name, &view)
+        .filter(|p| (p.camera.width, p.camera.height) == size && p.camera.fov_y_deg.is_finite());
+
+    // The camera: the scene's own, a recorded one with the same seed, or a newly generated one.
+    let (camera, generation) = if v == 0 {
+        (job.scene.camera, ViewGeneration { kind: "scene".into(), seed: 0, attempt: 0, probe: None })
+    } else {
+        let seed = render_seed(plan.seed, name, v, "camera");
+        match previous.as_ref().filter(|p| p.generation.kind == "generated" && p.generation.seed == seed) {
+            Some(p) => (camera_of(&p.camera), p.generation.clone()),
+            None => generate_view(ctx, job, v)?,
+        }
+    };
+    let mut scene = job.scene.clone();
+    scene.camera = camera;
+    let camera = camera_record(&camera, &scene);
+    let previous = previous.filter(|p| p.camera == camera);
+    let mut progress = PendingView {
+        scene: name.to_string(),
+        view: view.clone(),
+        split,
+        camera: camera.clone(),
+        generation,
+        noisy: Vec::new(),
+        reference: None,
+        aux: None,
+    };
+
+    let spps = plan.ladder();
+    for &spp in &spps {
+        let seed = render_seed(plan.seed, name, v, &format!("noisy-{spp}"));
+        let file = Layout::noisy_name(name, &view, spp);
+        let kept = previous.as_ref().and_then(|p| p.noisy.iter().find(|r| r.spp == spp && r.seed == seed)).cloned();
+        match kept.filter(|r| r.file == file && ctx.valid(&file, &camera)) {
+            Some(r) => progress.noisy.push(r),
+            None => {
+                let out = ctx.render(&scene, spp, seed, &format!("{label} {spp} spp"))?;
+                write_rgb(ctx.layout.path(&file), &out.color)?;
+                progress.noisy.push(RenderRecord { spp, seed, file, render_seconds: out.seconds });
+                ctx.rendered += 1;
+                ctx.record(&progress)?;
+            }
+        }
+        ctx.advance();
+    }
+
+    let aux_files: Vec<String> = AuxKind::ALL.iter().map(|&k| Layout::aux_name(name, &view, k)).collect();
+    let aux_seed = render_seed(plan.seed, name, v, "aux");
+    let kept = previous
+        .as_ref()
+        .and_then(|p| p.aux.clone())
+        .filter(|a| a.spp == plan.aux_spp && a.seed == aux_seed && aux_files.iter().all(|f| ctx.valid(f, &camera)));
+    let aux = match kept {
+        Some(a) => a,
+        None => {
+            // Features come from the first hit only, so a depth-1 render gives them at a
+            // fraction of a full path's cost.
+            let mut first_hit = scene.clone();
+            first_hit.max_depth = 1;
+            let out = ctx.render(&first_hit, plan.aux_spp, aux_seed, &format!("{label} features"))?;
+            for (kind, file) in AuxKind::ALL.iter().zip(&aux_files) {
+                let image = match kind {
+                    AuxKind::Albedo => &out.albedo,
+                    AuxKind::Normal => &out.normal,
+                    AuxKind::Diffuse => &out.diffuse,
+                    AuxKind::Specular => &out.specular,
+                };
+                write_rgb(ctx.layout.path(file), image)?;
+            }
+            ctx.rendered += 1;
+            AuxRecord {
+                spp: plan.aux_spp,
+                seed: aux_seed,
+                render_seconds: out.seconds,
+                albedo: aux_files[0].clone(),
+                normal: aux_files[1].clone(),
+                diffuse: aux_files[2].clone(),
+                specular: aux_files[3].clone(),
+            }
+        }
+    };
+    // OIDN's toolkit reads `<scene>_<view>_<spp>.alb.exr` / `.nrm.exr` beside every noisy render.
+    for &spp in &spps {
+        for kind in AuxKind::OIDN {
+            let src = ctx.layout.path(aux.file(kind));
+            link_or_copy(&src, &ctx.layout.path(&Layout::noisy_aux_name(name, &view, spp, kind)))?;
+        }
+    }
+    progress.aux = Some(aux);
+    ctx.record(&progress)?;
+    ctx.advance();
+
+    let ref_file = Layout::reference_name(name, &view);
+    let ref_seed = render_seed(plan.seed, name, v, "reference");
+    let kept = previous.as_ref().and_then(|p| p.reference.clone()).filter(|r| {
+        r.spp == plan.ref_spp
+            && r.seed == ref_seed
+            && r.supersample == plan.ref_supersample
+            && r.firefly.factor == plan.firefly_factor
+            && r.file == ref_file
+            && ctx.valid(&ref_file, &camera)
+    });
+    let (mut reference, mut reference_image) = match kept {
+        Some(r) => (r, None),
+        None => {
+            let ss = plan.ref_supersample;
+            let mut big = scene.clone();
+            big.film.width *= ss;
+            big.film.height *= ss;
+            let out = ctx.render(&big, plan.ref_spp, ref_seed, &format!("{label} reference {ss}x{ss}"))?;
+            let mut color = out.color;
+            let stats = if plan.firefly_factor > 0.0 {
+                despeckle(&mut color, plan.firefly_factor)?
+            } else {
+                hush_dataset::DespeckleStats { clamped_pixels: 0, energy_removed: 0.0 }
+            };
+            let image = color.downsample_box(ss as usize)?;
+            write_rgb(ctx.layout.path(&ref_file), &image)?;
+            ctx.rendered += 1;
+            let record = ReferenceRecord {
+                spp: plan.ref_spp,
+                seed: ref_seed,
+                file: ref_file.clone(),
+                render_seconds: out.seconds,
+                supersample: ss,
+                firefly: FireflyRecord {
+                    factor: plan.firefly_factor,
+                    clamped_pixels: stats.clamped_pixels,
+                    energy_removed: stats.energy_removed,
+                },
+                check: None,
+            };
+            (record, Some(image))
+        }
+    };
+    progress.reference = Some(reference.clone());
+    if plan.ref_check_spp > 0 {
+        ctx.record(&progress)?;
+    }
+    ctx.advance();
+
+    if plan.ref_check_spp > 0 {
+        let seed = render_seed(plan.seed, name, v, "reference-check");
+        if reference.check.as_ref().is_none_or(|c| c.spp != plan.ref_check_spp || c.seed != seed) {
+            let out = ctx.render(&scene, plan.ref_check_spp, seed, &format!("{label} reference check"))?;
+            let image = match reference_image.take() {
+                Some(i) => i,
+                None => read_rgb(ctx.layout.path(&ref_file))?,
+            };
+            let rel_mse = hush_eval::rel_mse(&image, &out.color)?;
+            reference.check =
+                Some(ReferenceCheck { spp: plan.ref_check_spp, seed, render_seconds: out.seconds, rel_mse });
+            ctx.rendered += 1;
+        }
+        ctx.advance();
+    }
+    let check = reference.check.as_ref().map(|c| format!(", reference relMSE {:.2e}", c.rel_mse)).unwrap_or_default();
+    progress.reference = Some(reference);
+    ctx.record(&progress)?;
+    ctx.note(format!("{label}: done ({split:?}{check})"));
+    Ok(())
+}

@@ -1,0 +1,167 @@
+//! Evaluation: every method on every test view and spp of a dataset, against the reference, with the
+//! error-against-time comparison, pictures and the report (hush-eval's `Report`).
+//!
+//! A method turns a view's noisy input into a test image: the noisy input itself (raw path tracing, always
+//! evaluated), each model, and the baselines named in the plan (see [`BASELINES`]).
+
+mod denoiser;
+mod methods;
+mod pictures;
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use hush_dataset::{Image, Manifest, Split, load_view, write_png_preview};
+use hush_eval::{REFERENCE, Report, Row, compare, exposure_of};
+
+pub use denoiser::{Denoiser, aux_of};
+pub use methods::{BASELINES, Method, Model, Run, baseline, method_name};
+
+use crate::Observer;
+use methods::Noisy;
+use pictures::{file_safe, pictures_of};
+
+/// What to evaluate: every option of `hush eval`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EvalPlan {
+    /// The dataset whose test split is evaluated.
+    pub dataset: PathBuf,
+    /// Trained models (`.safetensors`, or OIDN's `.tza` weights).
+    pub models: Vec<PathBuf>,
+    /// Baselines by name ([`BASELINES`]; `all` for every one); `noisy` is always evaluated.
+    pub baselines: Vec<String>,
+    /// Noisy inputs at these spp (empty: all stored ones).
+    pub spp: Vec<u32>,
+    /// The report folder.
+    pub out: PathBuf,
+    /// Denoise time is the median of this many warm runs.
+    pub timing_runs: usize,
+}
+
+impl EvalPlan {
+    pub const DEFAULT_TIMING_RUNS: usize = 3;
+
+    /// Evaluates `models` (and the noisy input) on `dataset`'s test split into `out`, with the defaults.
+    pub fn new(dataset: impl Into<PathBuf>, models: Vec<PathBuf>, out: impl Into<PathBuf>) -> Self {
+        EvalPlan {
+            dataset: dataset.into(),
+            models,
+            baselines: Vec::new(),
+            spp: Vec::new(),
+            out: out.into(),
+            timing_runs: Self::DEFAULT_TIMING_RUNS,
+        }
+    }
+}
+
+/// Evaluates the methods `plan` asks for on the test split of its dataset and writes the report into
+/// `plan.out`; returns the report.
+pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
+    let args = plan;
+    let manifest = Manifest::load(&args.dataset)?;
+    let views: Vec<_> = manifest.split(Split::Test).cloned().collect();
+    if views.is_empty() {
+        bail!("{} has no test views: render the dataset with --test-views 1 or more", args.dataset.display());
+    }
+    let mut report = Report::default();
+    let mut methods: Vec<Box<dyn Method>> = vec![Box::new(Noisy)];
+    for path in &args.models {
+        let (name, denoiser) = (method_name(path), Denoiser::load(path)?);
+        let info = &denoiser.info;
+        report.notes.push(format!("Model {name}: {} on features {}.", info.net.describe(), info.features));
+        methods.push(Box::new(Model { name, denoiser }));
+    }
+    let all: Vec<String> = BASELINES.iter().map(|(name, _)| name.to_string()).collect();
+    let baselines = if args.baselines.iter().any(|b| b == "all") { &all } else { &args.baselines };
+    for name in baselines {
+        if let Some(method) = baseline(name)? {
+            methods.push(method);
+        }
+    }
+    for (i, m) in methods.iter().enumerate() {
+        if methods[..i].iter().any(|other| other.name() == m.name()) || m.name() == REFERENCE {
+            bail!("two methods are called '{}': give the models distinct folder or file names", m.name());
+        }
+    }
+    let previews = args.out.join("previews");
+    let picture_dir = args.out.join("pictures");
+    for dir in [&previews, &picture_dir] {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+
+    report.notes.insert(0, format!("Dataset: {}; test views: {}.", args.dataset.display(), views.len()));
+    report.notes.push(format!(
+        "Machine: {}{} logical CPUs{}; denoise time is the median of {} warm runs on {}; render times are those \
+         the dataset's manifest recorded on the machine that rendered it.",
+        cpu_model().map(|m| format!("{m}, ")).unwrap_or_default(),
+        std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
+        std::env::var("RAYON_NUM_THREADS").map(|n| format!(", RAYON_NUM_THREADS={n}")).unwrap_or_default(),
+        args.timing_runs.max(1),
+        if cfg!(feature = "cuda") { "CUDA" } else { "the CPU" }
+    ));
+    report.notes.push("PNG previews of every image are in previews/ beside report.md.".into());
+
+    for view in &views {
+        let name = format!("{}_{}", view.scene, view.view);
+        let spps: Vec<u32> =
+            view.noisy.iter().map(|r| r.spp).filter(|s| args.spp.is_empty() || args.spp.contains(s)).collect();
+        let Some(&picture_spp) = spps.iter().min() else {
+            bail!("view {name} has no noisy render at the requested spp {:?}", args.spp);
+        };
+        let mut reference_row = true;
+        for spp in spps {
+            let images = load_view(&args.dataset, view, spp)?;
+            let exposure = exposure_of(&images.reference)?;
+            let preview = |method: &str, image: &Image| -> Result<String> {
+                let file = format!("{name}_{spp:06}_{}.png", file_safe(method));
+                write_png_preview(previews.join(&file), image, exposure)?;
+                Ok(format!("previews/{file}"))
+            };
+            if std::mem::take(&mut reference_row) {
+                let mut row =
+                    Row::new(&name, REFERENCE, view.reference.spp, &compare(&images.reference, &images.reference)?);
+                row.render_seconds = Some(view.reference.render_seconds);
+                row.preview = Some(preview(REFERENCE, &images.reference)?);
+                report.rows.push(row);
+            }
+            let render_seconds = view.noisy_at(spp).map(|r| r.render_seconds);
+            let mut outputs: Vec<(String, Image)> = Vec::new();
+            for method in &methods {
+                if report.skipped.iter().any(|k| k.method == method.name()) {
+                    continue;
+                }
+                let run = method
+                    .run(&images, args.timing_runs)
+                    .with_context(|| format!("{} on {name} at {spp} spp", method.name()))?;
+                let (image, denoise_seconds) = match run {
+                    Run::Done(image, seconds) => (image, seconds),
+                    Run::Skipped(skipped) => {
+                        observer.note(&format!("{}: skipped: {}", skipped.method, skipped.reason));
+                        report.skipped.push(skipped);
+                        continue;
+                    }
+                };
+                let mut row = Row::new(&name, method.name(), spp, &compare(&image, &images.reference)?);
+                row.render_seconds = render_seconds;
+                row.denoise_seconds = denoise_seconds;
+                row.preview = Some(preview(method.name(), &image)?);
+                report.rows.push(row);
+                if spp == picture_spp {
+                    outputs.push((method.name().to_string(), image));
+                }
+            }
+            if spp == picture_spp {
+                report.figures.extend(pictures_of(&picture_dir, &name, spp, &outputs, &images.reference, exposure)?);
+            }
+        }
+    }
+    report.write(&args.out)?;
+    Ok(report)
+}
+
+/// The CPU's model name (Linux's /proc/cpuinfo), if known.
+fn cpu_model() -> Option<String> {
+    let info = std::fs::read_to_string("/proc/cpuinfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("model name"))?;
+    Some(line.split_once(':')?.1.trim().to_string())
+}

@@ -1,0 +1,184 @@
+//! Training runs in a folder: options resolved against the run being resumed and the defaults, the samples
+//! prepared (and cached beside the dataset), hush-train's loop, and every epoch's logs and checkpoints
+//! written so that a killed run resumes bit-identically.
+
+mod folder;
+mod options;
+mod samples;
+
+use std::ops::ControlFlow;
+
+use anyhow::{Context, Result, bail};
+use hush_dataset::{Manifest, Split};
+use hush_train::{TrainError, read_train_state, train};
+
+pub use folder::{RunFolder, incompatibilities};
+pub use options::{
+    DEFAULT_DEVICE, DEFAULT_FEATURES, DEFAULT_WIDTH, RunConfig, TrainOptions, defaults, parse_features, parse_loss,
+    resolve,
+};
+
+use crate::Observer;
+use folder::{name_batch, save_epoch, write_file};
+use samples::load_split;
+
+/// What a finished [`run`] did.
+#[derive(Clone, Debug)]
+pub struct TrainOutcome {
+    pub folder: RunFolder,
+    pub config: RunConfig,
+    /// Optimizer steps taken by this call (a resumed run counts only its own).
+    pub steps: usize,
+    pub seconds: f64,
+    /// The share of the time the loop waited for its batches.
+    pub loader_share: f64,
+    pub first_loss: f64,
+    pub final_loss: f64,
+    /// The epoch with the lowest test loss, and that loss.
+    pub best: Option<(usize, f64)>,
+}
+
+/// Trains the run `options` describe (its `config` file read first), in its folder (`out`, or `resume`):
+/// a new run, or the one there continued exactly where it stopped.
+pub fn run(options: TrainOptions, observer: &dyn Observer) -> Result<TrainOutcome> {
+    let args = options.with_config_file()?;
+    let out = args.resume.as_ref().or(args.out.as_ref()).context("--out is required (or --resume RUN)")?.clone();
+    if let (Some(r), Some(o)) = (&args.resume, &args.out)
+        && r != o
+    {
+        bail!("--resume {} and --out {} name different folders; give one", r.display(), o.display());
+    }
+    let folder = RunFolder::new(&out);
+    // With --resume the run folder's config.json supplies every option not given.
+    let stored = folder.read_config()?;
+    if stored.is_none()
+        && let Some(run) = &args.resume
+    {
+        bail!("--resume {}: no config.json there; is it a run folder of `hush train`?", run.display());
+    }
+    let base = if args.resume.is_some() { stored.as_ref() } else { None };
+    let dataset = args
+        .dataset
+        .clone()
+        .or(base.map(|c| c.dataset.clone()))
+        .context("--dataset is required (or `dataset = ...` in --config)")?;
+    let manifest = Manifest::load(&dataset)?;
+    let spp = args.spp.clone().or(base.map(|c| c.spp.clone())).unwrap_or_default();
+    let train_images = manifest
+        .split(Split::Train)
+        .map(|v| v.noisy.iter().filter(|r| spp.is_empty() || spp.contains(&r.spp)).count())
+        .sum::<usize>();
+    if train_images == 0 {
+        bail!("{} has no training images at spp {spp:?}", dataset.display());
+    }
+    let cfg = resolve(&args, base, train_images)?;
+
+    let last = folder.last_checkpoint();
+    let resume_bytes = match &stored {
+        Some(stored) if last.is_file() => {
+            let problems = incompatibilities(stored, &cfg);
+            if !problems.is_empty() {
+                bail!(
+                    "{} holds a run that this command cannot continue ({}); choose another --out, or delete the \
+                     folder to start over",
+                    out.display(),
+                    problems.join("; ")
+                );
+            }
+            Some(std::fs::read(&last).with_context(|| format!("reading {}", last.display()))?)
+        }
+        _ if args.resume.is_some() => bail!("--resume {}: it has no checkpoints/last.safetensors yet", out.display()),
+        _ => None,
+    };
+    // The samples after the cheap checks above, before anything is written.
+    let loading = std::time::Instant::now();
+    let (samples, names) = load_split(&cfg, &manifest, Split::Train, observer)?;
+    let (test, _) = load_split(&cfg, &manifest, Split::Test, observer)?;
+    let load_seconds = loading.elapsed().as_secs_f64();
+    let checkpoints = folder.checkpoints();
+    std::fs::create_dir_all(&checkpoints).with_context(|| format!("creating {}", checkpoints.display()))?;
+    write_file(&folder.config(), serde_json::to_string_pretty(&cfg)?.as_bytes())?;
+
+    let (mut log, mut metrics) = (Vec::new(), Vec::new());
+    let mut start_step = 0;
+    if let Some(bytes) = &resume_bytes {
+        let state = read_train_state(bytes)?.context("checkpoints/last.safetensors carries no training state")?;
+        (log, metrics) = folder.read_logs(state.step, state.epoch);
+        start_step = state.step;
+        observer.note(&format!("resuming {} at step {} (epoch {})", out.display(), state.step, state.epoch));
+    }
+
+    let t = &cfg.train;
+    let epochs = t.steps.div_ceil(t.epoch_steps);
+    observer.note(&format!(
+        "training on {} images, testing on {} (ready in {load_seconds:.2} s), with {}: {} steps = {epochs} epochs of \
+         {} steps",
+        samples.len(),
+        test.len(),
+        t.features,
+        t.steps,
+        t.epoch_steps
+    ));
+    observer.task("train", "steps", t.steps as u64, start_step as u64);
+    let mut write_error = None;
+    let device = crate::device(Some(&cfg.device))?;
+    let result = train(t, &samples, &test, &device, resume_bytes.as_deref(), |report| {
+        let r = &report.row;
+        let rate = (r.step - start_step) as f64 / r.seconds.max(1e-9);
+        observer.progress(r.step as u64, &format!("epoch {} loss {:.4}, {rate:.2} steps/s", r.epoch, r.loss));
+        log.push(*r);
+        if let Some((row, bytes)) = report.epoch {
+            metrics.push(row);
+            if let Err(e) = save_epoch(&folder, &log, &metrics, &row, &bytes) {
+                write_error = Some(e);
+                return ControlFlow::Break(());
+            }
+        }
+        ControlFlow::Continue(())
+    });
+    observer.task_done();
+    if let Some(e) = write_error {
+        return Err(e.context("saving a checkpoint; training stopped"));
+    }
+    let trained = match result {
+        Ok(t) => t,
+        Err(TrainError::Diverged { step, batch, cause, last_good }) => {
+            let path = folder.last_good();
+            write_file(&path, &last_good.weights)?;
+            folder.write_loss_csv(&log)?;
+            let batch = name_batch(&batch, &names);
+            bail!(
+                "training diverged at step {step} on the batch [{batch}]: {cause}. The weights from before that \
+                 step are in {}, the last epoch's checkpoint in {}; try a lower --lr (now {}) or --clip-grad-norm",
+                path.display(),
+                last.display(),
+                t.lr
+            );
+        }
+        Err(e) => return Err(e.into()),
+    };
+    write_file(&folder.model(), &trained.weights)?;
+    let steps = trained.log.len();
+    let best = metrics.iter().rev().find(|r| r.best);
+    let summary = serde_json::json!({
+        "steps": steps,
+        "seconds": trained.seconds,
+        "steps_per_second": steps as f64 / trained.seconds.max(1e-9),
+        "loader_share": trained.loader_seconds / trained.seconds.max(1e-9),
+        "final_loss": log.last().map(|r| r.loss),
+        "best": best.map(|r| serde_json::json!({"epoch": r.epoch, "test_loss": r.test_loss})),
+        "threads": std::env::var("RAYON_NUM_THREADS").ok(),
+        "load_seconds": load_seconds,
+    });
+    write_file(&folder.summary(), serde_json::to_string_pretty(&summary)?.as_bytes())?;
+    Ok(TrainOutcome {
+        best: best.map(|b| (b.epoch, b.test_loss.unwrap_or(f64::NAN))),
+        first_loss: log.first().map(|r| r.loss).unwrap_or(f64::NAN),
+        final_loss: log.last().map(|r| r.loss).unwrap_or(f64::NAN),
+        loader_share: trained.loader_seconds / trained.seconds.max(1e-9),
+        seconds: trained.seconds,
+        steps,
+        config: cfg,
+        folder,
+    })
+}

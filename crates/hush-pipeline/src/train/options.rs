@@ -1,0 +1,359 @@
+//! The options of a training run, their defaults, and the [`RunConfig`] they resolve to.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use hush_net::{Activation, InputFeatures, Loss, NetConfig, PatchMlpConfig, UNetConfig, UNetKind};
+use hush_train::{Augment, OptimizerConfig, Schedule, TrainConfig};
+use serde::{Deserialize, Serialize};
+
+/// The input features when none are given.
+pub const DEFAULT_FEATURES: &str = "color,albedo,normal";
+/// The width multiplier of a U-Net when none is given (OIDN's widths are 1.0).
+pub const DEFAULT_WIDTH: f64 = 0.25;
+/// The device when none is given.
+pub const DEFAULT_DEVICE: &str = "cpu";
+
+/// The training configuration of a run that gives no options but its features: the thesis's recipe
+/// ([`TrainConfig::thesis`]: the MIX loss, Adam, a constant schedule, PU transfer, flips, batch 4) sized for a
+/// small machine: a U-Net at [`DEFAULT_WIDTH`], 64² crops, 300 steps at a learning rate of 1e-3 (the thesis's
+/// 1e-4 is for its 1270 epochs), one pass over the training images per epoch, the test loss every 10 epochs.
+pub fn defaults(features: InputFeatures) -> TrainConfig {
+    let net =
+        UNetConfig { kind: UNetKind::Unet, in_channels: features.in_channels(), out_channels: 3, width: DEFAULT_WIDTH };
+    TrainConfig {
+        net: net.into(),
+        lr: 1e-3,
+        steps: 300,
+        epoch_steps: 0,
+        crop: 64,
+        eval_every: 10,
+        ..TrainConfig::thesis(features)
+    }
+}
+
+/// The options of a training run, as `hush train` takes them. Every option can also be set in a `--config`
+/// TOML file under the flag's name (`eval-every = 5`); options given override the file ([`TrainOptions::or`]).
+/// What is not given comes from the run being resumed, or else from [`defaults`].
+#[derive(Clone, Debug, Default, PartialEq, Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
+#[serde(deny_unknown_fields, rename_all = "kebab-case")]
+pub struct TrainOptions {
+    /// TOML file with any of the options below, named as the flags (`lr = 1e-4`, `features = "dsnn"`).
+    #[cfg_attr(feature = "clap", arg(long))]
+    #[serde(skip)]
+    pub config: Option<PathBuf>,
+    /// Continue the run in this folder exactly where it stopped (from its last checkpoint and
+    /// config.json). Only --steps, --epochs, --eval-every and --device may change.
+    #[cfg_attr(feature = "clap", arg(long))]
+    #[serde(skip)]
+    pub resume: Option<PathBuf>,
+    /// Dataset folder (from `hush dataset`): its training split is trained on, its test split measured.
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub dataset: Option<PathBuf>,
+    /// Run folder: config.json, loss.csv, metrics.csv, checkpoints/, best.safetensors, model.safetensors.
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub out: Option<PathBuf>,
+    /// Input features: `color`, `color,albedo,normal` or `color,diffuse,specular,normal`, or the thesis's
+    /// names M_n, M_ann, M_dsnn [default: color,albedo,normal].
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub features: Option<String>,
+    /// Noisy images of these spp are the inputs (all of them if not given).
+    #[cfg_attr(feature = "clap", arg(long, value_delimiter = ','))]
+    pub spp: Option<Vec<u32>>,
+    /// Network: unet (OIDN's), unet_small, unet_large, autoencoder (the thesis's M_DAE), or patch_mlp (Burger et
+    /// al.'s MLP on 17×17 patches at stride 3, tanh; patch_mlp_relu with ReLU) [default: unet].
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub arch: Option<String>,
+    /// Width multiplier of the network (1.0 = OIDN's widths; the thesis's M1 0.66, M2 0.33; for patch_mlp, of
+    /// four hidden layers of 2047 units) [default: 0.25].
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub width: Option<f64>,
+    /// Loss: l1, mse, ssim, msssim, mix (0.16·L1 + 0.84·(1 − MS-SSIM)), mape, smape, l1_grad [default: mix].
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub loss: Option<String>,
+    /// Optimizer: adam, adamw (decoupled weight decay 0.01), sgd, sgd_momentum (0.9) [default: adam].
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub optimizer: Option<String>,
+    /// Base learning rate (for one_cycle its maximum) [default: 1e-3].
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub lr: Option<f64>,
+    /// Learning-rate schedule per epoch: constant, step[:every:gamma], lambda:f1,f2,..., exponential[:gamma],
+    /// cosine[:min_lr], sgdr[:t0:t_mult], one_cycle [default: constant].
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub schedule: Option<String>,
+    /// Train this many epochs (instead of --steps).
+    #[cfg_attr(feature = "clap", arg(long, conflicts_with = "steps"))]
+    pub epochs: Option<usize>,
+    /// Optimizer steps in total [default: 300].
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub steps: Option<usize>,
+    /// Steps per epoch [default: one pass over the training images, ⌈images / batch⌉].
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub epoch_steps: Option<usize>,
+    /// Batch size [default: 4].
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub batch: Option<usize>,
+    /// Square crop size, a multiple of 16 (the thesis: 256) [default: 64].
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub crop: Option<usize>,
+    /// Augmentation: crop (random crops only), flips (and 8 orientations), full (and OIDN's channel
+    /// permutations) [default: flips].
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub augment: Option<String>,
+    /// Seed of the initial weights and of the crops [default: 0].
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub seed: Option<u64>,
+    /// Every N epochs: test loss, checkpoints/epoch_N.safetensors, the loss plot [default: 10].
+    #[cfg_attr(feature = "clap", arg(long, alias = "checkpoint-every"))]
+    pub eval_every: Option<usize>,
+    /// Clip the gradients' global L2 norm to this.
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub clip_grad_norm: Option<f64>,
+    /// cpu, or cuda when built with `--features cuda` [default: cpu].
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub device: Option<String>,
+}
+
+/// Everything a run is: where its data comes from, where it runs, and the training configuration.
+/// Saved as `config.json` in the run folder.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunConfig {
+    pub dataset: PathBuf,
+    /// The spp of the noisy inputs (empty: all).
+    pub spp: Vec<u32>,
+    /// `cpu` or `cuda`.
+    pub device: String,
+    pub train: TrainConfig,
+}
+
+impl TrainOptions {
+    /// Fills every option not given here from `file`.
+    pub fn or(self, file: TrainOptions) -> TrainOptions {
+        macro_rules! merge {
+            ($($f:ident),*) => { TrainOptions { config: self.config, resume: self.resume, $($f: self.$f.or(file.$f)),* } };
+        }
+        merge!(
+            dataset,
+            out,
+            features,
+            spp,
+            arch,
+            width,
+            loss,
+            optimizer,
+            lr,
+            schedule,
+            epochs,
+            steps,
+            epoch_steps,
+            batch,
+            crop,
+            augment,
+            seed,
+            eval_every,
+            clip_grad_norm,
+            device
+        )
+    }
+}
+
+impl TrainOptions {
+    /// Reads options from a TOML file whose keys are the flags' names (`lr = 1e-4`, `eval-every = 5`).
+    pub fn from_toml_file(path: &Path) -> Result<TrainOptions> {
+        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))
+    }
+
+    /// These options with those of their `config` file (if any) filling in what is not given.
+    pub fn with_config_file(self) -> Result<TrainOptions> {
+        match &self.config {
+            Some(path) => {
+                let file = TrainOptions::from_toml_file(path)?;
+                Ok(self.or(file))
+            }
+            None => Ok(self),
+        }
+    }
+}
+
+/// The thesis's feature-set names as aliases of feature lists.
+pub fn parse_features(s: &str) -> Result<InputFeatures> {
+    let alias = match s.trim().to_ascii_lowercase().trim_start_matches("m_") {
+        "n" => Some("color"),
+        "ann" => Some("albedo,normal"),
+        "dsnn" => Some("diffuse,specular,normal"),
+        _ => None,
+    };
+    Ok(InputFeatures::parse(alias.unwrap_or(s))?)
+}
+
+/// A `--arch`: a U-Net kind or the patch MLP with its activation.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Arch {
+    UNet(UNetKind),
+    PatchMlp(Activation),
+}
+
+impl Arch {
+    /// The network of this arch for `in_channels` input channels at width multiplier `width`.
+    fn config(self, in_channels: usize, width: f64) -> NetConfig {
+        match self {
+            Arch::UNet(kind) => UNetConfig { kind, in_channels, out_channels: 3, width }.into(),
+            Arch::PatchMlp(activation) => PatchMlpConfig::burger(in_channels, width, activation).into(),
+        }
+    }
+}
+
+fn parse_arch(s: &str) -> Result<Arch> {
+    match s {
+        "oidn" => Ok(Arch::UNet(UNetKind::Unet)),
+        "dae" | "m_dae" => Ok(Arch::UNet(UNetKind::Autoencoder)),
+        "patch_mlp" | "mlp" => Ok(Arch::PatchMlp(Activation::Tanh)),
+        "patch_mlp_relu" => Ok(Arch::PatchMlp(Activation::Relu)),
+        _ => UNetKind::parse(s).map(Arch::UNet).with_context(|| {
+            format!("unknown --arch '{s}': use unet, unet_small, unet_large, autoencoder, patch_mlp or patch_mlp_relu")
+        }),
+    }
+}
+
+pub fn parse_loss(s: &str) -> Result<Loss> {
+    Ok(match s {
+        "l1" | "mae" => Loss::L1,
+        "l2" | "mse" => Loss::Mse,
+        "ssim" => Loss::Ssim,
+        "msssim" | "ms-ssim" | "ms_ssim" => Loss::MsSsim,
+        "mix" | "l1_msssim" => Loss::Mix,
+        _ => serde_json::from_value(serde_json::Value::String(s.into()))
+            .map_err(|_| anyhow::anyhow!("unknown loss '{s}': use l1, mse, ssim, msssim or mix"))?,
+    })
+}
+
+/// Builds the run's configuration from the options, taking what they do not give from `base` (the run
+/// being resumed) or else the defaults; `train_images` sizes an epoch.
+///
+/// ```
+/// use hush_pipeline::TrainOptions;
+/// use hush_pipeline::train::{defaults, parse_features, resolve};
+///
+/// let options = TrainOptions { dataset: Some("ds".into()), lr: Some(1e-4), ..Default::default() };
+/// let run = resolve(&options, None, 10).unwrap();
+/// let features = parse_features("color,albedo,normal").unwrap();
+/// // What was not given is the default; an epoch is one pass over the 10 images in batches of 4.
+/// assert_eq!(run.train, hush_train::TrainConfig { lr: 1e-4, epoch_steps: 3, ..defaults(features) });
+/// // Resuming that run with a new budget keeps everything else.
+/// let more = TrainOptions { steps: Some(900), ..Default::default() };
+/// assert_eq!(resolve(&more, Some(&run), 10).unwrap().train.lr, 1e-4);
+/// ```
+pub fn resolve(args: &TrainOptions, base: Option<&RunConfig>, train_images: usize) -> Result<RunConfig> {
+    let b = base.map(|c| &c.train);
+    let features = match &args.features {
+        Some(f) => parse_features(f)?,
+        None => b.map_or_else(|| parse_features(DEFAULT_FEATURES), |b| Ok(b.features.clone()))?,
+    };
+    // What an option not given takes: the run being resumed, or else the defaults.
+    let d = b.cloned().unwrap_or_else(|| defaults(features.clone()));
+    let base_arch = match &d.net {
+        NetConfig::PatchMlp(c) => Arch::PatchMlp(c.activation),
+        NetConfig::UNet(c) => Arch::UNet(c.kind),
+    };
+    let arch = match &args.arch {
+        Some(a) => parse_arch(a)?,
+        None => base_arch,
+    };
+    let net = match (b, args.width) {
+        // Resuming with the run's own kind of network and no new width: the run's network as it was (an
+        // MLP's hidden sizes, σ and patch included), whatever repeats its `--arch`.
+        (Some(b), None) if base_arch == arch => b.net.with_in_channels(features.in_channels()),
+        (_, width) => {
+            let base_width = d.net.as_unet().map(|c| c.width);
+            arch.config(features.in_channels(), width.or(base_width).unwrap_or(DEFAULT_WIDTH))
+        }
+    };
+    let optimizer = match &args.optimizer {
+        Some(o) => OptimizerConfig::parse(o)
+            .with_context(|| format!("unknown --optimizer '{o}': use adam, adamw, sgd or sgd_momentum"))?,
+        None => d.optimizer.clone(),
+    };
+    let augment = match &args.augment {
+        Some(a) => Augment::parse(a).with_context(|| format!("unknown --augment '{a}': use crop, flips or full"))?,
+        None => d.augment,
+    };
+    let loss = match &args.loss {
+        Some(l) => parse_loss(l)?,
+        None => d.loss,
+    };
+    let batch = args.batch.unwrap_or(d.batch);
+    let epoch_steps = args
+        .epoch_steps
+        .or((d.epoch_steps > 0).then_some(d.epoch_steps))
+        .unwrap_or(train_images.div_ceil(batch.max(1)).max(1));
+    let steps = match args.epochs {
+        Some(e) => e * epoch_steps,
+        None => args.steps.unwrap_or(d.steps),
+    };
+    let epochs = steps.div_ceil(epoch_steps.max(1));
+    let schedule = match &args.schedule {
+        Some(s) => Schedule::parse(s, epochs).with_context(|| {
+            format!(
+                "unknown --schedule '{s}': use constant, step[:every:gamma], lambda:f1,f2,..., \
+                 exponential[:gamma], cosine[:min_lr], sgdr[:t0:t_mult] or one_cycle"
+            )
+        })?,
+        None => d.schedule.clone(),
+    };
+    let device = args.device.clone().or(base.map(|c| c.device.clone())).unwrap_or_else(|| DEFAULT_DEVICE.into());
+    if !crate::is_known_device(&device) {
+        bail!("unknown --device '{device}': use cpu or cuda");
+    }
+    let train = TrainConfig {
+        features,
+        transfer: d.transfer,
+        net,
+        loss,
+        optimizer,
+        lr: args.lr.unwrap_or(d.lr),
+        schedule,
+        steps,
+        epoch_steps,
+        batch,
+        crop: args.crop.unwrap_or(d.crop),
+        augment,
+        seed: args.seed.unwrap_or(d.seed),
+        eval_every: args.eval_every.unwrap_or(d.eval_every),
+        clip_grad_norm: args.clip_grad_norm.or(d.clip_grad_norm),
+    };
+    train.validate()?;
+    let dataset = args
+        .dataset
+        .clone()
+        .or(base.map(|c| c.dataset.clone()))
+        .context("--dataset is required (or `dataset = ...` in --config)")?;
+    let spp = args.spp.clone().or(base.map(|c| c.spp.clone())).unwrap_or_default();
+    Ok(RunConfig { dataset, spp, device, train })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{TrainOptions, resolve};
+
+    /// Resuming keeps the run's network when the options repeat its kind without a width: a patch MLP
+    /// trained at width 0.0625 stays at 0.0625 (it used to fall back to the default 0.25 and be refused as a
+    /// changed network); a new width or kind is a new network.
+    #[test]
+    fn resuming_with_the_same_arch_keeps_the_network() {
+        let args = |arch: &str, width: Option<f64>| TrainOptions {
+            arch: Some(arch.into()),
+            width,
+            dataset: Some("ds".into()),
+            ..Default::default()
+        };
+        let base = resolve(&args("patch_mlp", Some(0.0625)), None, 8).unwrap();
+        let resumed = resolve(&args("patch_mlp", None), Some(&base), 8).unwrap();
+        assert_eq!(resumed.train.net, base.train.net);
+        let wider = resolve(&args("patch_mlp", Some(0.125)), Some(&base), 8).unwrap();
+        assert_ne!(wider.train.net, base.train.net);
+        let unet = resolve(&args("unet", None), Some(&base), 8).unwrap();
+        assert!(unet.train.net.as_unet().is_some());
+    }
+}
