@@ -1,14 +1,12 @@
 //! `cargo xtask sweep <name|all>`: the thesis's hyperparameter study (chapter 7) as resumable runs of
-//! `hush train` + `hush eval`, locally on N workers or as a Slurm job array, aggregated into
-//! `target/sweeps/<name>/<scale>/report.md` with each thesis claim reproduced, refuted or inconclusive.
+//! `hush train` + `hush eval`, locally on N workers or as a Slurm job array, aggregated by
+//! `hush sweep-report` (from the plan `plan.rs` writes) into `target/sweeps/<name>/<scale>/report.md` with each
+//! thesis claim reproduced, refuted or inconclusive.
 //!
 //! Definitions: `data/sweeps/scales.toml` and one `data/sweeps/<name>.toml` per sweep (see `spec`).
 
-mod claims;
 mod exec;
-mod plot;
-mod report;
-mod results;
+mod plan;
 mod slurm;
 mod slurm_selftest;
 mod spec;
@@ -16,8 +14,7 @@ mod spec;
 use std::path::{Path, PathBuf};
 
 use exec::{Layout, Outcome};
-use results::RunResult;
-use spec::{Run, Scale, Sweep};
+use spec::{Run, Scale};
 
 use crate::util::{Result, build_hush, ensure_vulkan, release, target_dir};
 
@@ -132,24 +129,6 @@ fn hush(o: &Options, layout: &Layout) -> Result<PathBuf> {
     }
 }
 
-fn collect(sweeps: &[Sweep], scale: &Scale, runs: &[Run], layout: &Layout) -> Result<()> {
-    let mut all = Vec::new();
-    let results: Vec<RunResult> = runs.iter().map(|r| RunResult::load(r, &layout.run(r, &scale.name))).collect();
-    for sweep in sweeps {
-        let mine: Vec<RunResult> = results.iter().filter(|r| r.run.sweep == sweep.name).cloned().collect();
-        let dir = layout.sweep(&sweep.name, &scale.name);
-        let claims = report::write(sweep, scale, &mine, &dir)?;
-        println!("report: {}", dir.join("report.md").display());
-        all.push((sweep.name.clone(), claims));
-    }
-    if sweeps.len() > 1 {
-        let dir = layout.sweep("all", &scale.name);
-        report::write_all(scale, &all, &results, &dir)?;
-        println!("report: {}", dir.join("report.md").display());
-    }
-    Ok(())
-}
-
 /// Writes the Slurm job-array script of the sweep and returns its path.
 fn emit_slurm(o: &Options, scale: &Scale, runs: usize, layout: &Layout, hush: &Path) -> Result<PathBuf> {
     let exe = std::env::current_exe().map_err(|e| format!("cannot find the xtask executable: {e}"))?;
@@ -210,7 +189,7 @@ fn slurm_selftest(mut o: Options) -> Result<()> {
             script.with_file_name("slurm-*.out").display()
         ));
     }
-    collect(&sweeps, &scale, &runs, &layout)?;
+    plan::report(&hush, &sweeps, &scale, &runs, &layout)?;
     println!("slurm-selftest: {} array tasks completed every run in {seconds:.1} s", runs.len());
     Ok(())
 }
@@ -236,7 +215,7 @@ pub fn run(args: &[String]) -> Result<()> {
             }
             Ok(())
         }
-        Action::Collect => collect(&sweeps, &scale, &runs, &layout),
+        Action::Collect => plan::report(&hush(&o, &layout)?, &sweeps, &scale, &runs, &layout),
         Action::Prepare => {
             ensure_vulkan()?;
             exec::prepare_dataset(&hush(&o, &layout)?, &scale, &layout).map(drop)
@@ -292,7 +271,7 @@ pub fn run(args: &[String]) -> Result<()> {
                 })
                 .collect();
             let outcomes = exec::run_all(&hush, &jobs, &elsewhere, workers, threads);
-            collect(&sweeps, &scale, &runs, &layout)?;
+            plan::report(&hush, &sweeps, &scale, &runs, &layout)?;
             let failed: Vec<String> = runs
                 .iter()
                 .zip(&outcomes)
