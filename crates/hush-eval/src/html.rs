@@ -5,8 +5,8 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use crate::doc::{Block, Document, Inline, Text};
-use crate::report::{CONVENTIONS, REFERENCE, TRADEOFF_INTRO, Table};
+use crate::doc::{Block, Document, Grid, Inline, Text};
+use crate::report::{CONVENTIONS, REFERENCE, TRADEOFF_INTRO};
 use crate::tradeoff::ErrorMetric;
 use crate::{Error, Report, Result};
 
@@ -92,7 +92,7 @@ pub fn to_html(report: &Report, dir: &Path) -> Result<String> {
     }
     for (title, t) in report.tables() {
         let _ = writeln!(h, "<h2>{}</h2>", escape_html(&title));
-        table(&mut h, &t);
+        grid(&mut h, &Grid::of_table(&t), dir)?;
     }
     let _ = writeln!(h, "<h2>Error against run time</h2>\n<p>{}</p>", escape_html(TRADEOFF_INTRO));
     let methods: Vec<&str> = report.methods().into_iter().filter(|m| *m != REFERENCE).collect();
@@ -123,7 +123,7 @@ pub fn to_html(report: &Report, dir: &Path) -> Result<String> {
     h.push_str("</table>\n");
     if let Some(t) = report.overview_table() {
         h.push_str("<p>Over the views:</p>");
-        table(&mut h, &t);
+        grid(&mut h, &Grid::of_table(&t), dir)?;
         h.push_str("<p>Per view:</p>");
     }
     h.push_str("<ul>");
@@ -150,25 +150,6 @@ pub fn to_html(report: &Report, dir: &Path) -> Result<String> {
     Ok(h)
 }
 
-/// A table; the first column is text, the others numbers (right-aligned). Links are left out: the page loads
-/// nothing.
-fn table(h: &mut String, t: &Table) {
-    h.push_str("<table><tr>");
-    for head in &t.header {
-        let _ = write!(h, "<th>{}</th>", escape_html(head));
-    }
-    h.push_str("</tr>");
-    for row in &t.rows {
-        h.push_str("<tr>");
-        for (i, cell) in row.iter().enumerate() {
-            let class = if i == 0 { "" } else { " class=n" };
-            let _ = write!(h, "<td{class}>{}</td>", escape_html(cell));
-        }
-        h.push_str("</tr>");
-    }
-    h.push_str("</table>\n");
-}
-
 /// A [`Document`] as one page; its images are read from `dir` and inlined, so a missing one is an error
 /// naming it.
 pub fn document_to_html(doc: &Document, dir: &Path) -> Result<String> {
@@ -189,26 +170,31 @@ pub fn document_to_html(doc: &Document, dir: &Path) -> Result<String> {
                 }
                 h.push_str("</ul>\n");
             }
-            Block::Table(g) => {
-                h.push_str("<table>\n<tr>");
-                for head in &g.header {
-                    let _ = write!(h, "<th>{}</th>", escape_html(head));
-                }
-                h.push_str("</tr>\n");
-                for row in &g.rows {
-                    h.push_str("<tr>");
-                    for (i, cell) in row.iter().enumerate() {
-                        let class = if g.right.get(i).copied().unwrap_or(false) { " class=n" } else { "" };
-                        let _ = write!(h, "<td{class}>{}</td>", inline_html(cell, dir)?);
-                    }
-                    h.push_str("</tr>\n");
-                }
-                h.push_str("</table>\n");
-            }
+            Block::Table(g) => grid(&mut h, g, dir)?,
         }
     }
     h.push_str("</body></html>\n");
     Ok(h)
+}
+
+/// A table; right-aligned columns get class `n` (numbers). A [`crate::Table`]'s links are left out (see
+/// [`Grid::of_table`]): the page loads nothing.
+fn grid(h: &mut String, g: &Grid, dir: &Path) -> Result<()> {
+    h.push_str("<table>\n<tr>");
+    for head in &g.header {
+        let _ = write!(h, "<th>{}</th>", escape_html(head));
+    }
+    h.push_str("</tr>\n");
+    for row in &g.rows {
+        h.push_str("<tr>");
+        for (i, cell) in row.iter().enumerate() {
+            let class = if g.right.get(i).copied().unwrap_or(false) { " class=n" } else { "" };
+            let _ = write!(h, "<td{class}>{}</td>", inline_html(cell, dir)?);
+        }
+        h.push_str("</tr>\n");
+    }
+    h.push_str("</table>\n");
+    Ok(())
 }
 
 fn inline_html(t: &Text, dir: &Path) -> Result<String> {
