@@ -89,7 +89,8 @@ pub fn write(sweep: &PlanSweep, scale: &PlanScale, results: &[RunResult], dir: &
             cells.push(cell(&r.run.name, at(r, false)));
         }
         doc.push(heading("Images"));
-        doc.push(Block::Paragraph(text(format!("{view} at {spp} spp (tonemapped previews of `hush eval`)."))));
+        let about = format!("{view} at {spp} spp (tonemapped previews of ");
+        doc.push(Block::Paragraph(vec![plain(about), code("hush eval"), plain(").")]));
         let columns = head.len();
         doc.push(Block::Table(Grid { header: head, right: vec![false; columns], rows: vec![cells] }));
         crops_and_differences(&mut doc, &done, &view, spp, dir);
@@ -107,10 +108,15 @@ pub fn write(sweep: &PlanSweep, scale: &PlanScale, results: &[RunResult], dir: &
 /// Per run: its flags, epochs, speed, losses and the test metrics of its model.
 fn runs_section(doc: &mut Document, done: &[&RunResult]) {
     doc.push(heading("Runs"));
-    doc.push(Block::Paragraph(text(
-        "Test metrics are means over the test views and spp of the final model (`hush eval`); losses are those \
-         of `hush train`'s `metrics.csv` (test loss on whole test images).",
-    )));
+    doc.push(Block::Paragraph(vec![
+        plain("Test metrics are means over the test views and spp of the final model ("),
+        code("hush eval"),
+        plain("); losses are those of "),
+        code("hush train"),
+        plain("'s "),
+        code("metrics.csv"),
+        plain(" (test loss on whole test images)."),
+    ]));
     // The flags every run shares are shown once; the table shows those that differ.
     let mut common = done.first().map(|r| r.run.train.clone()).unwrap_or_default();
     common.retain(|pair| done.iter().all(|r| r.run.train.contains(pair)));
@@ -229,11 +235,15 @@ fn crops_and_differences(doc: &mut Document, done: &[&RunResult], view: &str, sp
         return;
     }
     doc.push(heading("Crops and differences"));
-    doc.push(Block::Paragraph(text(format!(
-        "{view} at {spp} spp: each run's denoised crop of the window where the noisy input is worst, and its pixels \
-         off the reference by more than 3 % (yellow) and 10 % (red) after the evaluation tonemap, as in the thesis's \
-         figures 7.5–7.7 (`hush eval`'s pictures)."
-    ))));
+    doc.push(Block::Paragraph(vec![
+        plain(format!(
+            "{view} at {spp} spp: each run's denoised crop of the window where the noisy input is worst, and its \
+             pixels off the reference by more than 3 % (yellow) and 10 % (red) after the evaluation tonemap, as in the \
+             thesis's figures 7.5–7.7 ("
+        )),
+        code("hush eval"),
+        plain("'s pictures)."),
+    ]));
     let header = ["run", "crop", "pixels off", "share > 3 %, > 10 %"].map(String::from).to_vec();
     doc.push(Block::Table(Grid { header, right: vec![false; 4], rows }));
 }
@@ -294,7 +304,11 @@ fn curves_section(doc: &mut Document, done: &[&RunResult], dir: &Path) -> Result
     }
     write_file(&dir.join("curves.csv"), csv.as_bytes())?;
     doc.push(heading("Loss over epochs"));
-    doc.push(Block::Paragraph(text("All rows: `curves.csv`. Epoch on x, the loss on a log scale on y.")));
+    doc.push(Block::Paragraph(vec![
+        plain("All rows: "),
+        code("curves.csv"),
+        plain(". Epoch on x, the loss on a log scale on y."),
+    ]));
     let train: Vec<Vec<(f64, f64)>> =
         done.iter().map(|r| r.epochs.iter().map(|e| (e.epoch as f64, e.train_loss)).collect()).collect();
     let test: Vec<Vec<(f64, f64)>> =
@@ -353,15 +367,18 @@ pub fn claims_section(doc: &mut Document, claims: &[Claim]) {
         return;
     }
     doc.push(heading("The thesis's findings"));
-    doc.push(Block::Paragraph(text(format!(
-        "Rule: runs A and B are compared on the rows of the same seed, test view and spp; \
+    doc.push(Block::Paragraph(vec![
+        plain(format!(
+            "Rule: runs A and B are compared on the rows of the same seed, test view and spp; \
          d̄ is the mean of the differences (positive = the thesis's direction), SE their standard error. \
          Reproduced when d̄ > 2·SE, refuted when d̄ < −2·SE, inconclusive otherwise or with fewer than 2 pairs. \
          \"Little difference\" claims: reproduced when |d̄| + 2·SE < {PSNR_MARGIN_DB} dB, refuted when |d̄| − 2·SE > \
          {PSNR_MARGIN_DB} dB. Rows of one view at several spp are not independent: SE is optimistic. Timing claims \
-         compare wall seconds per epoch, which on a shared machine are only comparable under equal load (each run's \
-         `done.json` records the load average)."
-    ))));
+         compare wall seconds per epoch, which on a shared machine are only comparable under equal load (each run's "
+        )),
+        code("done.json"),
+        plain(" records the load average)."),
+    ]));
     let header = ["sweep", "thesis", "measured", "verdict"].map(String::from).to_vec();
     let rows = claims.iter().map(|c| vec![text(&c.sweep), text(&c.thesis), text(&c.measured), verdict(c.verdict)]);
     doc.push(Block::Table(Grid { header, right: vec![false; 4], rows: rows.collect() }));
