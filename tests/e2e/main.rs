@@ -232,13 +232,13 @@ fn pipeline_runs_end_to_end() {
     check_eval_report(&report);
 }
 
-/// What `hush eval` writes on the pipeline's dataset (one test view, 1 and 2 spp): summary.json (schema 2)
+/// What `hush eval` writes on the pipeline's dataset (one test view, 1 and 2 spp): summary.json (schema 3)
 /// with separate render and denoise seconds, the error-against-time CSV, comparisons and plots, pictures,
 /// report.md and a self-contained report.html.
 fn check_eval_report(report: &Path) {
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(report.join("summary.json")).unwrap()).unwrap();
-    assert_eq!(summary["schema"], 2);
+    assert_eq!(summary["schema"], 3);
     let rows = summary["rows"].as_array().unwrap();
     let methods: Vec<&str> = rows.iter().map(|r| r["method"].as_str().unwrap()).collect();
     assert_eq!(methods, ["reference", "noisy", "run/model", "guided", "noisy", "run/model", "guided"]);
@@ -249,6 +249,12 @@ fn check_eval_report(report: &Path) {
         assert!(r["ms_ssim"].is_null(), "32 px is too small for MS-SSIM: {r}");
         assert!(r["flip"].as_f64().is_some_and(|f| (0.0..=1.0).contains(&f)), "{r}");
     }
+    let figures = summary["figures"].as_array().unwrap();
+    let kinds: Vec<String> =
+        figures.iter().map(|f| format!("{} {} {}", f["kind"]["type"], f["kind"]["view"], f["kind"]["spp"])).collect();
+    assert_eq!(kinds, ["\"crops\" \"cbox_v001\" 1", "\"differences\" \"cbox_v001\" 1"], "{figures:?}");
+    let marked: Vec<&serde_json::Value> = figures[1]["images"].as_array().unwrap().iter().collect();
+    assert!(marked.iter().all(|i| i["method"].is_string() && i["marks"]["over_low"].is_number()), "{marked:?}");
     let tradeoff = summary["tradeoff"].as_array().unwrap();
     assert_eq!(tradeoff.len(), 8, "model and filter at 1 and 2 spp, for relMSE and 1 - SSIM: {tradeoff:?}");
     assert!(tradeoff.iter().all(|c| c["method"] != "noisy" && c["seconds"].as_f64().is_some()));

@@ -14,6 +14,8 @@ use crate::util::{Result, ensure_venv, project_root, site_packages, spawn, targe
 pub const SETUP: &str = "cargo xtask baselines setup";
 
 pub fn run(args: &[String]) -> Result<()> {
+    // Neither takes a flag.
+    crate::args::Flags::parse(args.get(1..).unwrap_or_default(), &[], 0, "cargo xtask baselines setup | check")?;
     match args.first().map(String::as_str) {
         Some("setup") => setup(),
         Some("check") => check(),

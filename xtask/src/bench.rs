@@ -20,11 +20,31 @@
 
 use std::process::Command;
 
+use crate::args::{Flags, Takes};
 use crate::mitsuba;
 use crate::util::{
-    Result, build_hush, ensure_vulkan, load_average, number_arg, output, project_root, read_json, release, spawn,
-    target_dir, write_json,
+    Result, build_hush, ensure_vulkan, load_average, output, project_root, read_json, spawn, target_dir, write_json,
 };
+
+/// The usage of each benchmark.
+const USAGE: [&str; 4] = [
+    "bench render [--release] [--spp N (every scene)] [--no-mitsuba] [--no-build]",
+    "bench dataset [--release] [--size N] [--views N]",
+    "bench net [--release]",
+    "bench train [--release] [--steps N]",
+];
+
+/// The flags of benchmark `which` (an index into [`USAGE`]) parsed from `args`.
+pub fn flags(args: &[String], which: usize) -> Result<Flags> {
+    use Takes::{Nothing, Number};
+    let known: &[(&str, Takes)] = match which {
+        0 => &[("--release", Nothing), ("--spp", Number), ("--no-mitsuba", Nothing), ("--no-build", Nothing)],
+        1 => &[("--release", Nothing), ("--size", Number), ("--views", Number)],
+        2 => &[("--release", Nothing)],
+        _ => &[("--release", Nothing), ("--steps", Number)],
+    };
+    Flags::parse(args, known, 0, &format!("cargo xtask {}", USAGE[which]))
+}
 
 pub fn run(args: &[String]) -> Result<()> {
     match args.first().map(String::as_str) {
@@ -32,13 +52,7 @@ pub fn run(args: &[String]) -> Result<()> {
         Some("dataset") => dataset(&args[1..]),
         Some("net") => crate::bench_net::net(&args[1..]),
         Some("train") => crate::bench_net::train(&args[1..]),
-        _ => Err(
-            "usage: cargo xtask bench render [--release] [--spp N (every scene)] [--no-mitsuba] [--no-build]\n       \
-                  cargo xtask bench dataset [--release] [--size N] [--views N]\n       \
-                  cargo xtask bench net [--release]\n       \
-                  cargo xtask bench train [--release] [--steps N]"
-                .into(),
-        ),
+        _ => Err(format!("usage: cargo xtask {}", USAGE.join("\n       cargo xtask "))),
     }
 }
 
@@ -96,15 +110,17 @@ const SCENES: [BenchScene; 3] = [
 /// Every scene at its settings, max_depth 8; `render.json` holds one entry per scene.
 fn render(args: &[String]) -> Result<()> {
     const MAX_DEPTH: u32 = 8;
+    let flags = flags(args, 0)?;
     ensure_vulkan()?;
-    let hush = if args.iter().any(|a| a == "--no-build") {
+    let release = flags.has("--release");
+    let hush = if flags.has("--no-build") {
         // The binary as last built (e.g. while the workspace is mid-edit).
-        target_dir().join(if release(args) { "release" } else { "debug" }).join("hush")
+        target_dir().join(if release { "release" } else { "debug" }).join("hush")
     } else {
-        build_hush(release(args))?
+        build_hush(release)?
     };
-    let spp_override = if args.iter().any(|a| a == "--spp") { Some(number_arg(args, "--spp", 0)?) } else { None };
-    let skip_mitsuba = args.iter().any(|a| a == "--no-mitsuba");
+    let spp_override = if flags.has("--spp") { Some(flags.number("--spp", 0)?) } else { None };
+    let skip_mitsuba = flags.has("--no-mitsuba");
     let dir = target_dir().join("bench");
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
     let load_before = load_average();
@@ -263,9 +279,10 @@ fn render(args: &[String]) -> Result<()> {
 /// extrapolation). Wall seconds include scene loading and GPU set-up; the render seconds come from the
 /// manifest.
 fn dataset(args: &[String]) -> Result<()> {
+    let flags = flags(args, 1)?;
     ensure_vulkan()?;
-    let hush = build_hush(release(args))?;
-    let (size, views): (u32, u32) = (number_arg(args, "--size", 128)?, number_arg(args, "--views", 2)?);
+    let hush = build_hush(flags.has("--release"))?;
+    let (size, views): (u32, u32) = (flags.number("--size", 128)?, flags.number("--views", 2)?);
     let dir = target_dir().join("bench");
     let out = dir.join("dataset-cbox");
     let _ = std::fs::remove_dir_all(&out);

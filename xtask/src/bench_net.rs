@@ -15,8 +15,9 @@ use std::path::Path;
 use std::process::Command;
 
 use crate::baselines;
-use crate::util::{Result, build_hush, ensure_vulkan, load_average, output, project_root, release, spawn, target_dir};
-use crate::util::{number_arg, read_json, write_json};
+use crate::bench::flags;
+use crate::util::{Result, build_hush, ensure_vulkan, load_average, output, project_root, spawn, target_dir};
+use crate::util::{read_json, write_json};
 
 fn hush_json(hush: &Path, threads: Option<usize>, args: &[&str]) -> Result<serde_json::Value> {
     let mut cmd = Command::new(hush);
@@ -84,7 +85,7 @@ fn fastest(results: &[(usize, serde_json::Value)]) -> (usize, serde_json::Value)
 }
 
 pub fn net(args: &[String]) -> Result<()> {
-    let hush = build_hush(release(args))?;
+    let hush = build_hush(flags(args, 2)?.has("--release"))?;
     let runs = "3";
     let load_before = load_average();
     let thread_counts = [1usize, 2];
@@ -142,9 +143,10 @@ pub fn net(args: &[String]) -> Result<()> {
 
 /// The demo's training settings (`xtask/src/demo.rs`), `--steps` of them (default 60).
 pub fn train(args: &[String]) -> Result<()> {
+    let flags = flags(args, 3)?;
     ensure_vulkan()?;
-    let hush = build_hush(release(args))?;
-    let steps: u32 = number_arg(args, "--steps", 60)?;
+    let hush = build_hush(flags.has("--release"))?;
+    let steps: u32 = flags.number("--steps", 60)?;
     let dir = target_dir().join("bench");
     let dataset = dir.join("train-dataset");
     if !dataset.join("manifest.json").is_file() {

@@ -35,9 +35,7 @@ const DEFAULT_COMPUTE_CAP: &str = "80";
 const PACKAGES: [&str; 3] = ["hush-net", "hush-train", "hush"];
 
 pub fn run(args: &[String]) -> Result<()> {
-    if !args.is_empty() {
-        return Err("usage: cargo xtask cuda-check (no arguments; CUDA_COMPUTE_CAP and NVCC_CCBIN are read)".into());
-    }
+    crate::args::Flags::parse(args, &[], 0, "cargo xtask cuda-check (CUDA_COMPUTE_CAP and NVCC_CCBIN are read)")?;
     let root = ensure_toolkit()?;
     let nvcc = root.join("bin").join("nvcc");
     let compute_cap = std::env::var("CUDA_COMPUTE_CAP").unwrap_or_else(|_| DEFAULT_COMPUTE_CAP.into());

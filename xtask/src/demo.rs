@@ -7,7 +7,8 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use crate::util::{Result, build_hush, ensure_vulkan, project_root, read_json, release, spawn, target_dir};
+use crate::args::{Flags, Takes};
+use crate::util::{Result, build_hush, ensure_vulkan, project_root, read_json, spawn, target_dir};
 
 /// Where the demo writes: `target/demo/` with `dataset/`, `run/` and the report.
 pub struct DemoPaths {
@@ -103,13 +104,15 @@ pub fn noisy_and_model_psnr(dir: &Path, model: &Path) -> Result<Vec<NoisyAndMode
 }
 
 pub fn run(args: &[String]) -> Result<()> {
+    let known = [("--release", Takes::Nothing), ("--resume", Takes::Nothing)];
+    let flags = Flags::parse(args, &known, 0, "cargo xtask demo [--release] [--resume]")?;
     ensure_vulkan()?;
-    let hush = build_hush(release(args))?;
+    let hush = build_hush(flags.has("--release"))?;
     let paths = DemoPaths::new();
     let dir = &paths.dir;
     // Each demo starts from scratch, so that output of an older build never mixes in;
     // `--resume` keeps what an interrupted demo already rendered and trained.
-    if !args.iter().any(|a| a == "--resume") && dir.exists() {
+    if !flags.has("--resume") && dir.exists() {
         std::fs::remove_dir_all(dir).map_err(|e| format!("cannot clear {}: {e}", dir.display()))?;
     }
     render_dataset(&hush, &paths)?;

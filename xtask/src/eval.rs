@@ -10,30 +10,30 @@
 use std::path::PathBuf;
 use std::process::Command;
 
+use crate::args::{Flags, Takes};
 use crate::demo::{self, DemoPaths, eval_command};
-use crate::util::{Result, build_hush, cargo, ensure_vulkan, is_root, project_root, release, spawn, target_dir};
+use crate::util::{Result, build_hush, cargo, ensure_vulkan, is_root, project_root, spawn, target_dir};
 
 const USAGE: &str =
-    "usage: cargo xtask eval [--release] [--check-html] [--timing-runs N] [--dataset DIR --model FILE] [--out DIR]";
+    "cargo xtask eval [--release] [--check-html] [--timing-runs N] [--dataset DIR --model FILE] [--out DIR]";
 const CHROMIUM_INSTALL: &str = "apt-get install -y chromium";
 
 pub fn run(args: &[String]) -> Result<()> {
-    let mut timing_runs = "3".to_string();
-    let (mut dataset, mut model, mut out) = (None, None, target_dir().join("eval"));
-    let mut it = args.iter();
-    while let Some(a) = it.next() {
-        let mut value = || it.next().cloned().ok_or_else(|| format!("{a} needs a value\n{USAGE}"));
-        match a.as_str() {
-            "--release" | "--check-html" => {}
-            "--timing-runs" => timing_runs = value()?,
-            "--dataset" => dataset = Some(PathBuf::from(value()?)),
-            "--model" => model = Some(PathBuf::from(value()?)),
-            "--out" => out = PathBuf::from(value()?),
-            _ => return Err(format!("unknown argument '{a}'\n{USAGE}")),
-        }
-    }
+    use Takes::{Nothing, Number, Value};
+    let known = [
+        ("--release", Nothing),
+        ("--check-html", Nothing),
+        ("--timing-runs", Number),
+        ("--dataset", Value),
+        ("--model", Value),
+        ("--out", Value),
+    ];
+    let flags = Flags::parse(args, &known, 0, USAGE)?;
+    let timing_runs = flags.value("--timing-runs").unwrap_or("3").to_string();
+    let (dataset, model) = (flags.value("--dataset").map(PathBuf::from), flags.value("--model").map(PathBuf::from));
+    let out = flags.value("--out").map_or_else(|| target_dir().join("eval"), PathBuf::from);
     ensure_vulkan()?;
-    let hush = build_hush(release(args))?;
+    let hush = build_hush(flags.has("--release"))?;
     let (dataset, model) = match (dataset, model) {
         (Some(dataset), Some(model)) => (dataset, model),
         (None, None) => {
@@ -48,11 +48,11 @@ pub fn run(args: &[String]) -> Result<()> {
             }
             (paths.dataset.clone(), paths.model())
         }
-        _ => return Err(format!("--dataset and --model go together\n{USAGE}")),
+        _ => return Err(format!("--dataset and --model go together\nusage: {USAGE}")),
     };
     spawn(eval_command(&hush, &dataset, &model, &out).args(["--baseline", "all", "--timing-runs", &timing_runs]))?;
     let html = out.join("report.html");
-    if args.iter().any(|a| a == "--check-html") {
+    if flags.has("--check-html") {
         check_html(&html)?;
     }
     println!("report: {}", html.display());

@@ -1,6 +1,7 @@
 //! `cargo xtask <task>`: orchestration of the `hush` binary. It spawns processes and reads
 //! their JSON; it links neither Candle nor wgpu.
 
+mod args;
 mod baselines;
 mod bench;
 mod bench_net;

@@ -21,7 +21,10 @@ const LIBLLVM19_FALLBACK: &str = "/usr/lib/x86_64-linux-gnu/libLLVM-19.so.1";
 
 pub fn run(args: &[String]) -> Result<()> {
     match args.first().map(String::as_str) {
-        Some("setup") => setup(),
+        Some("setup") => {
+            crate::args::Flags::parse(&args[1..], &[], 0, "cargo xtask mitsuba setup").and_then(|_| setup())
+        }
+        // Its arguments are render_references.py's.
         Some("references") => references(&args[1..]),
         _ => Err("usage: cargo xtask mitsuba setup | references [render_references.py args]".into()),
     }

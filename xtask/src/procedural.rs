@@ -12,7 +12,8 @@ use std::path::PathBuf;
 use std::process::Command;
 use std::time::Instant;
 
-use crate::util::{Result, build_hush, ensure_vulkan, read_json, release, target_dir, write_json};
+use crate::args::{Flags, Takes};
+use crate::util::{Result, build_hush, ensure_vulkan, read_json, target_dir, write_json};
 
 const USAGE: &str = "usage: cargo xtask procedural check [--count N] [--seed S] [--size PX] [--spp N] \
                      [--ingredients default|basic|...] [--release] [--hush PATH]";
@@ -22,19 +23,6 @@ pub fn run(args: &[String]) -> Result<()> {
         Some("check") => check(&args[1..]),
         _ => Err(USAGE.into()),
     }
-}
-
-/// The value after `--name`, or `default`.
-fn flag(args: &[String], name: &str, default: &str) -> Result<String> {
-    match args.iter().position(|a| a == name) {
-        Some(i) => args.get(i + 1).cloned().ok_or_else(|| format!("{name} needs a value\n{USAGE}")),
-        None => Ok(default.to_string()),
-    }
-}
-
-fn number<T: std::str::FromStr>(args: &[String], name: &str, default: &str) -> Result<T> {
-    let v = flag(args, name, default)?;
-    v.parse().map_err(|_| format!("{name} {v}: not a number\n{USAGE}"))
 }
 
 /// The `q`-quantile (0..=1) of sorted values, by the nearest rank.
@@ -57,15 +45,26 @@ fn quiet(cmd: &mut Command) -> std::result::Result<(), String> {
 }
 
 fn check(args: &[String]) -> Result<()> {
-    let count: u64 = number(args, "--count", "100")?;
-    let seed: u64 = number(args, "--seed", "0")?;
-    let size: u32 = number(args, "--size", "32")?;
-    let spp: u32 = number(args, "--spp", "4")?;
-    let features = flag(args, "--ingredients", "default")?;
+    use Takes::{Nothing, Number, Value};
+    let known = [
+        ("--count", Number),
+        ("--seed", Number),
+        ("--size", Number),
+        ("--spp", Number),
+        ("--ingredients", Value),
+        ("--release", Nothing),
+        ("--hush", Value),
+    ];
+    let flags = Flags::parse(args, &known, 0, USAGE.trim_start_matches("usage: "))?;
+    let count: u64 = flags.number("--count", 100)?;
+    let seed: u64 = flags.number("--seed", 0)?;
+    let size: u32 = flags.number("--size", 32)?;
+    let spp: u32 = flags.number("--spp", 4)?;
+    let features = flags.value("--ingredients").unwrap_or("default").to_string();
     ensure_vulkan()?;
-    let hush = match args.iter().position(|a| a == "--hush") {
-        Some(i) => PathBuf::from(args.get(i + 1).ok_or_else(|| format!("--hush needs a path\n{USAGE}"))?),
-        None => build_hush(release(args))?,
+    let hush = match flags.value("--hush") {
+        Some(path) => PathBuf::from(path),
+        None => build_hush(flags.has("--release"))?,
     };
     let dir = target_dir().join("procedural");
     let _ = std::fs::remove_dir_all(dir.join("scenes"));

@@ -9,10 +9,10 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Command;
 
+use crate::args::{Flags, Takes};
 use crate::demo::{eval_command, noisy_and_model_psnr, train_command};
 use crate::util::{
-    Result, build_hush, ensure_vulkan, load_average, number_arg, project_root, read_json, release, spawn, target_dir,
-    write_json,
+    Result, build_hush, ensure_vulkan, load_average, project_root, read_json, spawn, target_dir, write_json,
 };
 
 /// The scenes, as paths below the repository root.
@@ -25,12 +25,14 @@ const SPP: u64 = 4;
 const STEPS: u32 = 2000;
 
 pub fn run(args: &[String]) -> Result<()> {
-    let steps = number_arg(args, "--steps", STEPS)?;
+    let known = [("--release", Takes::Nothing), ("--resume", Takes::Nothing), ("--steps", Takes::Number)];
+    let flags = Flags::parse(args, &known, 0, "cargo xtask train-check [--release] [--resume] [--steps N]")?;
+    let steps = flags.number("--steps", STEPS)?;
     ensure_vulkan()?;
-    let hush = build_hush(release(args))?;
+    let hush = build_hush(flags.has("--release"))?;
     let dir = target_dir().join("train-check");
     // A fresh start unless `--resume` (the dataset and the training both continue where they stopped).
-    if !args.iter().any(|a| a == "--resume") && dir.exists() {
+    if !flags.has("--resume") && dir.exists() {
         std::fs::remove_dir_all(&dir).map_err(|e| format!("cannot clear {}: {e}", dir.display()))?;
     }
     let (dataset, run_dir, eval_dir) = (dir.join("dataset"), dir.join("run"), dir.join("eval"));

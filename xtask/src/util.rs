@@ -26,19 +26,6 @@ pub fn target_dir() -> PathBuf {
     std::env::var_os("CARGO_TARGET_DIR").map(PathBuf::from).unwrap_or_else(|| project_root().join("target"))
 }
 
-/// Whether `--release` was passed.
-pub fn release(args: &[String]) -> bool {
-    args.iter().any(|a| a == "--release")
-}
-
-/// The number after `flag` in `args`, or `default` where the flag is absent.
-pub fn number_arg<T: std::str::FromStr>(args: &[String], flag: &str, default: T) -> Result<T> {
-    match args.iter().position(|a| a == flag) {
-        Some(i) => args.get(i + 1).and_then(|s| s.parse().ok()).ok_or_else(|| format!("{flag} needs a number")),
-        None => Ok(default),
-    }
-}
-
 /// Builds the `hush` binary (the dev profile optimizes dependencies, so the tests' build is
 /// reused; `--release` builds with full optimization) and returns its path.
 pub fn build_hush(release: bool) -> Result<PathBuf> {
@@ -133,22 +120,31 @@ pub fn read_json(path: &Path) -> Result<serde_json::Value> {
     serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))
 }
 
-/// Writes a JSON file (temp + rename).
+/// Writes a JSON file atomically.
 pub fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
     write_atomic(path, &serde_json::to_string_pretty(value).expect("JSON values serialize"))
 }
 
-/// Writes a text file through a temporary name and a rename, creating its folder: a killed process never
-/// leaves a partial file.
+/// Writes a text file atomically (see [`write_atomic_with`]).
 pub fn write_atomic(path: &Path, text: &str) -> Result<()> {
-    if let Some(dir) = path.parent() {
-        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    write_atomic_with(path, |tmp| std::fs::write(tmp, text))
+}
+
+/// xtask's one atomic writer: `write` fills a temporary file beside `path` (`.<name>.<pid>.tmp`, so that
+/// processes writing the same file do not share it), which is then renamed over `path`; the folder is created.
+/// A killed process never leaves a partial file, and a failed write removes its temporary.
+pub fn write_atomic_with(path: &Path, write: impl FnOnce(&Path) -> std::io::Result<()>) -> Result<()> {
+    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let name = path.file_name().ok_or_else(|| format!("{}: not a file name", path.display()))?;
+    let tmp = dir.join(format!(".{}.{}.tmp", name.to_string_lossy(), std::process::id()));
+    let done = write(&tmp)
+        .map_err(|e| format!("{}: {e}", tmp.display()))
+        .and_then(|()| std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display())));
+    if done.is_err() {
+        let _ = std::fs::remove_file(&tmp);
     }
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".tmp");
-    let tmp = PathBuf::from(tmp);
-    std::fs::write(&tmp, text).map_err(|e| format!("{}: {e}", tmp.display()))?;
-    std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
+    done
 }
 
 /// A Python venv's interpreter.
@@ -186,14 +182,6 @@ pub fn site_packages(venv: &Path) -> Result<PathBuf> {
 mod tests {
     use super::*;
 
-    #[test]
-    fn number_arg_reads_the_value_after_its_flag() {
-        let args: Vec<String> = ["bench", "--steps", "12", "--spp"].iter().map(|s| s.to_string()).collect();
-        assert_eq!(number_arg(&args, "--steps", 60u32), Ok(12));
-        assert_eq!(number_arg(&args, "--size", 128u32), Ok(128));
-        assert_eq!(number_arg::<u32>(&args, "--spp", 4), Err("--spp needs a number".to_string()));
-    }
-
     fn scratch(name: &str) -> PathBuf {
         let dir = std::env::temp_dir().join(format!("xtask-util-{name}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
@@ -220,6 +208,15 @@ mod tests {
         assert_eq!(std::fs::read_to_string(&path).unwrap(), "second");
         let names: Vec<_> = std::fs::read_dir(dir.join("sub")).unwrap().map(|e| e.unwrap().file_name()).collect();
         assert_eq!(names, ["marker.ok"]);
+        // A write that fails keeps the old file and removes its temporary.
+        let err = write_atomic_with(&path, |tmp| {
+            std::fs::write(tmp, "half")?;
+            Err(std::io::Error::other("disk full"))
+        })
+        .unwrap_err();
+        assert!(err.contains("disk full"), "{err}");
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "second");
+        assert_eq!(std::fs::read_dir(dir.join("sub")).unwrap().count(), 1);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -34,6 +34,10 @@ pub enum Error {
     #[error("{0}")]
     Picture(String),
 
+    /// A JSON file (an evaluation summary, a sweep plan) does not parse.
+    #[error("{}: not the JSON hush expects ({source}); rewrite it with the command that made it", path.display())]
+    ReadJson { path: PathBuf, source: serde_json::Error },
+
     /// Serializing the JSON summary failed.
     #[error("{}: writing JSON failed: {source}", path.display())]
     Json { path: PathBuf, source: serde_json::Error },

@@ -5,7 +5,8 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use crate::report::{CONVENTIONS, REFERENCE, TRADEOFF_INTRO, Table};
+use crate::doc::{Block, Document, Grid, Inline, Text};
+use crate::report::{CONVENTIONS, REFERENCE, TRADEOFF_INTRO};
 use crate::tradeoff::ErrorMetric;
 use crate::{Error, Report, Result};
 
@@ -60,15 +61,19 @@ fn img(dir: &Path, path: &str, alt: &str) -> Result<String> {
     Ok(format!("<img alt=\"{}\" src=\"data:image/png;base64,{}\">", escape_html(alt), base64(&bytes)))
 }
 
+/// The start of a page, up to and including `<body>`.
+fn head(title: &str) -> String {
+    format!(
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{}</title>\
+         <style>{STYLE}</style></head><body>\n",
+        escape_html(title)
+    )
+}
+
 /// The report as HTML; images named by the report are read from `dir` and inlined.
 pub fn to_html(report: &Report, dir: &Path) -> Result<String> {
-    let mut h = String::new();
-    let _ = write!(
-        h,
-        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>Denoising evaluation</title>\
-         <style>{STYLE}</style></head><body>\n<h1>Denoising evaluation</h1>\n<p class=\"small\">{}</p>\n",
-        escape_html(CONVENTIONS)
-    );
+    let mut h = head("Denoising evaluation");
+    let _ = write!(h, "<h1>Denoising evaluation</h1>\n<p class=\"small\">{}</p>\n", escape_html(CONVENTIONS));
     if !report.notes.is_empty() {
         h.push_str("<ul>");
         for n in &report.notes {
@@ -87,7 +92,7 @@ pub fn to_html(report: &Report, dir: &Path) -> Result<String> {
     }
     for (title, t) in report.tables() {
         let _ = writeln!(h, "<h2>{}</h2>", escape_html(&title));
-        table(&mut h, &t);
+        grid(&mut h, &Grid::of_table(&t), dir)?;
     }
     let _ = writeln!(h, "<h2>Error against run time</h2>\n<p>{}</p>", escape_html(TRADEOFF_INTRO));
     let methods: Vec<&str> = report.methods().into_iter().filter(|m| *m != REFERENCE).collect();
@@ -118,7 +123,7 @@ pub fn to_html(report: &Report, dir: &Path) -> Result<String> {
     h.push_str("</table>\n");
     if let Some(t) = report.overview_table() {
         h.push_str("<p>Over the views:</p>");
-        table(&mut h, &t);
+        grid(&mut h, &Grid::of_table(&t), dir)?;
         h.push_str("<p>Per view:</p>");
     }
     h.push_str("<ul>");
@@ -145,21 +150,73 @@ pub fn to_html(report: &Report, dir: &Path) -> Result<String> {
     Ok(h)
 }
 
-/// A table; the first column is text, the others numbers (right-aligned). Links are left out: the page loads
-/// nothing.
-fn table(h: &mut String, t: &Table) {
-    h.push_str("<table><tr>");
-    for head in &t.header {
+/// A [`Document`] as one page; its images are read from `dir` and inlined, so a missing one is an error
+/// naming it.
+pub fn document_to_html(doc: &Document, dir: &Path) -> Result<String> {
+    let mut h = head(&doc.title);
+    for block in &doc.blocks {
+        match block {
+            Block::Heading(level, t) => {
+                let level = level.clamp(&1, &6);
+                let _ = writeln!(h, "<h{level}>{}</h{level}>", inline_html(t, dir)?);
+            }
+            Block::Paragraph(t) => {
+                let _ = writeln!(h, "<p>{}</p>", inline_html(t, dir)?);
+            }
+            Block::List(items) => {
+                h.push_str("<ul>\n");
+                for item in items {
+                    let _ = writeln!(h, "<li>{}</li>", inline_html(item, dir)?);
+                }
+                h.push_str("</ul>\n");
+            }
+            Block::Table(g) => grid(&mut h, g, dir)?,
+        }
+    }
+    h.push_str("</body></html>\n");
+    Ok(h)
+}
+
+/// A table; right-aligned columns get class `n` (numbers). A [`crate::Table`]'s links are left out (see
+/// [`Grid::of_table`]): the page loads nothing.
+fn grid(h: &mut String, g: &Grid, dir: &Path) -> Result<()> {
+    h.push_str("<table>\n<tr>");
+    for head in &g.header {
         let _ = write!(h, "<th>{}</th>", escape_html(head));
     }
-    h.push_str("</tr>");
-    for row in &t.rows {
+    h.push_str("</tr>\n");
+    for row in &g.rows {
         h.push_str("<tr>");
         for (i, cell) in row.iter().enumerate() {
-            let class = if i == 0 { "" } else { " class=n" };
-            let _ = write!(h, "<td{class}>{}</td>", escape_html(cell));
+            let class = if g.right.get(i).copied().unwrap_or(false) { " class=n" } else { "" };
+            let _ = write!(h, "<td{class}>{}</td>", inline_html(cell, dir)?);
         }
-        h.push_str("</tr>");
+        h.push_str("</tr>\n");
     }
     h.push_str("</table>\n");
+    Ok(())
+}
+
+fn inline_html(t: &Text, dir: &Path) -> Result<String> {
+    let mut h = String::new();
+    for i in t {
+        match i {
+            Inline::Text(s) => h.push_str(&escape_html(s)),
+            Inline::Code(s) => {
+                let _ = write!(h, "<code>{}</code>", escape_html(s));
+            }
+            Inline::Bold(s) => {
+                let _ = write!(h, "<b>{}</b>", escape_html(s));
+            }
+            Inline::Image { alt, path } => h.push_str(&img(dir, path, alt)?),
+            Inline::Link { text, href } => {
+                let href = match href.strip_suffix("report.md") {
+                    Some(stem) => format!("{stem}report.html"),
+                    None => href.clone(),
+                };
+                let _ = write!(h, "<a href=\"{}\">{}</a>", escape_html(&href), escape_html(text));
+            }
+        }
+    }
+    Ok(h)
 }

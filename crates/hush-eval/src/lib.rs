@@ -24,6 +24,7 @@
 //! # }
 //! ```
 
+pub mod doc;
 mod error;
 pub mod external;
 pub mod flip;
@@ -35,6 +36,7 @@ pub mod oidn_native;
 pub mod pictures;
 mod plot;
 mod report;
+pub mod sweep;
 mod timing;
 mod tonemap;
 pub mod tradeoff;
@@ -43,7 +45,7 @@ pub use error::{Error, Result};
 pub use metrics::{
     MS_SSIM_MIN_SIDE, Metrics, compare, mae, ms_ssim_tonemapped, mse, psnr, psnr_of_mse, rel_mse, ssim, ssim_tonemapped,
 };
-pub use plot::{plot_error_vs_time, series_color};
-pub use report::{CONVENTIONS, Figure, FigureImage, NOISY, REFERENCE, Report, Row, SCHEMA, Skipped, Table};
+pub use plot::{plot_error_vs_time, plot_lines, series_color};
+pub use report::{CONVENTIONS, Figure, FigureImage, FigureKind, NOISY, REFERENCE, Report, Row, SCHEMA, Skipped, Table};
 pub use timing::{Timing, time_median};
 pub use tonemap::{exposure_of, filmic, tonemap};

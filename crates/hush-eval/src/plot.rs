@@ -80,21 +80,11 @@ pub fn plot_error_vs_time(
             .margin_bottom(24)
             .build_cartesian_2d(x_lo..x_hi, y_lo..y_hi)
             .map_err(err)?;
-        let light = RGBColor(232, 232, 232);
-        let dark = RGBColor(160, 160, 160);
-        for decade in (x_lo as i32)..(x_hi as i32) {
-            for m in 1..10 {
-                let x = f64::from(decade) + f64::from(m).log10();
-                let c = if m == 1 { dark } else { light };
-                chart.draw_series(LineSeries::new([(x, y_lo), (x, y_hi)], c)).map_err(err)?;
-            }
+        for (x, c) in grid_lines(x_lo, x_hi) {
+            chart.draw_series(LineSeries::new([(x, y_lo), (x, y_hi)], c)).map_err(err)?;
         }
-        for decade in (y_lo as i32)..(y_hi as i32) {
-            for m in 1..10 {
-                let y = f64::from(decade) + f64::from(m).log10();
-                let c = if m == 1 { dark } else { light };
-                chart.draw_series(LineSeries::new([(x_lo, y), (x_hi, y)], c)).map_err(err)?;
-            }
+        for (y, c) in grid_lines(y_lo, y_hi) {
+            chart.draw_series(LineSeries::new([(x_lo, y), (x_hi, y)], c)).map_err(err)?;
         }
         let frame = [(x_lo, y_lo), (x_hi, y_lo), (x_hi, y_hi), (x_lo, y_hi), (x_lo, y_lo)];
         chart.draw_series(LineSeries::new(frame, BLACK)).map_err(err)?;
@@ -111,9 +101,79 @@ pub fn plot_error_vs_time(
             labels.push((px - text_width(&text) / 2, py + 6, text));
         }
         for d in (y_lo as i32)..=(y_hi as i32) {
-            let (px, py) = chart.backend_coord(&(x_lo, f64::from(d)));
-            let text = format!("1e{d}");
-            labels.push((px - 6 - text_width(&text), py - GLYPH_H * LABEL_SCALE / 2, text));
+            labels.push(y_label(chart.backend_coord(&(x_lo, f64::from(d))), d));
+        }
+        root.present().map_err(err)?;
+    }
+    for (x, y, text) in &labels {
+        draw_text(&mut buf, width, height, *x, *y, text);
+    }
+    png_rgb8(&buf, width, height)
+}
+
+/// Log-scale grid lines between the decades `lo` and `hi` (log10 values): at 1..9 × each power of ten,
+/// darker at the powers.
+fn grid_lines(lo: f64, hi: f64) -> Vec<(f64, RGBColor)> {
+    let mut out = Vec::new();
+    for decade in (lo as i32)..(hi as i32) {
+        for m in 1..10 {
+            let c = if m == 1 { RGBColor(160, 160, 160) } else { RGBColor(232, 232, 232) };
+            out.push((f64::from(decade) + f64::from(m).log10(), c));
+        }
+    }
+    out
+}
+
+/// The label `1e<d>` left of the pixel `(px, py)` of the y axis.
+fn y_label((px, py): (i32, i32), d: i32) -> (i32, i32, String) {
+    let text = format!("1e{d}");
+    (px - 6 - text_width(&text), py - GLYPH_H * LABEL_SCALE / 2, text)
+}
+
+/// Draws each series (color `i` for `series[i]`, see [`series_color`]) as a line with a dot per point, x
+/// linear from 0 (labelled at 0 and its largest x), y on a log scale (labelled at each power of ten), into a
+/// `width`×`height` PNG. Non-positive and non-finite y are left out; without any point the plot is an empty
+/// frame. The sweeps' loss curves (x the epoch).
+pub fn plot_lines(series: &[Vec<(f64, f64)>], width: u32, height: u32) -> Result<Vec<u8>> {
+    let usable = |p: &&(f64, f64)| p.0.is_finite() && p.1.is_finite() && p.1 > 0.0;
+    let points: Vec<(f64, f64)> = series.iter().flatten().filter(usable).copied().collect();
+    let x_hi = points.iter().fold(1.0f64, |m, p| m.max(p.0)).ceil();
+    let (lo, hi) = points.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.1), b.max(p.1)));
+    let (y_lo, y_hi) = if lo.is_finite() {
+        (lo.log10().floor(), hi.log10().ceil().max(lo.log10().floor() + 1.0))
+    } else {
+        (-1.0, 0.0)
+    };
+    let mut buf = vec![255u8; (width * height * 3) as usize];
+    let mut labels: Vec<(i32, i32, String)> = Vec::new();
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (width, height)).into_drawing_area();
+        let err = |e: DrawingAreaErrorKind<_>| Error::Picture(format!("drawing a line chart: {e:?}"));
+        let mut chart = ChartBuilder::on(&root)
+            .margin(12)
+            .margin_left(48)
+            .margin_bottom(24)
+            .build_cartesian_2d(0.0..x_hi, y_lo..y_hi)
+            .map_err(err)?;
+        for (y, c) in grid_lines(y_lo, y_hi) {
+            chart.draw_series(LineSeries::new([(0.0, y), (x_hi, y)], c)).map_err(err)?;
+        }
+        let frame = [(0.0, y_lo), (x_hi, y_lo), (x_hi, y_hi), (0.0, y_hi), (0.0, y_lo)];
+        chart.draw_series(LineSeries::new(frame, BLACK)).map_err(err)?;
+        for (i, line) in series.iter().enumerate() {
+            let (r, g, b) = series_color(i);
+            let c = RGBColor(r, g, b);
+            let xy: Vec<(f64, f64)> = line.iter().filter(usable).map(|&(x, y)| (x, y.log10())).collect();
+            chart.draw_series(LineSeries::new(xy.clone(), c.stroke_width(2))).map_err(err)?;
+            chart.draw_series(xy.into_iter().map(|p| Circle::new(p, 3, c.filled()))).map_err(err)?;
+        }
+        for x in [0.0, x_hi] {
+            let (px, py) = chart.backend_coord(&(x, y_lo));
+            let text = format!("{x}");
+            labels.push((px - text_width(&text) / 2, py + 6, text));
+        }
+        for d in (y_lo as i32)..=(y_hi as i32) {
+            labels.push(y_label(chart.backend_coord(&(0.0, f64::from(d))), d));
         }
         root.present().map_err(err)?;
     }

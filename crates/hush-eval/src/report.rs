@@ -1,13 +1,13 @@
 //! Result tables: `report.md` and a self-contained `report.html` for people, `summary.json` and
 //! `error_vs_time.csv` for scripts, and the error-against-time plots.
 //!
-//! # `summary.json` (schema 2)
+//! # `summary.json` (schema 3)
 //!
 //! Field names are stable; a change that breaks readers bumps `schema`.
 //!
 //! ```text
 //! {
-//!   "schema": 2,
+//!   "schema": 3,
 //!   "conventions": "<how the numbers were computed>",
 //!   "notes": ["<machine, threads, dataset, models>", ...],
 //!   "skipped": [{"method": "bm3d", "reason": "...", "install": "<command>"}],
@@ -37,9 +37,18 @@
 //!     "median_time_percent": 30.0 | null, "median_raw_spp": 55.0 | null,
 //!     "median_error_ratio_same_time": 3.1 | null
 //!   }],
-//!   "figures": [{"title": ..., "images": [{"caption": ..., "path": "pictures/....png"}]}]
+//!   "figures": [{
+//!     "title": ...,
+//!     "kind": {"type": "crops" | "differences", "view": "cbox_v005", "spp": 16} | {"type": "other"},
+//!     "images": [{"caption": ..., "path": "pictures/....png",
+//!                 "method": "noisy" | ... ,                        // absent outside figures of methods
+//!                 "marks": {"over_low": 0.12, "over_high": 0.01}}] // difference pictures only
+//!   }]
 //! }
 //! ```
+//!
+//! Schema 3 added the figures' `kind` and their images' `method` and `marks`; a schema-2 summary reads back
+//! with every figure of kind `other`.
 //!
 //! `summary.json` reads back into a [`Report`] with `serde_json::from_str` (the derived fields are ignored).
 
@@ -49,11 +58,13 @@ use std::path::Path;
 use hush_dataset::write_atomic;
 use serde::{Deserialize, Deserializer, Serialize};
 
+use crate::doc::{Block, Document, Grid, image, text};
+use crate::pictures::Marks;
 use crate::tradeoff::{self, Comparison, ErrorMetric};
 use crate::{Error, Metrics, Result};
 
 /// The version of `summary.json`'s layout.
-pub const SCHEMA: u32 = 2;
+pub const SCHEMA: u32 = 3;
 
 /// How the numbers in a report were computed; written at the top of `report.md` and into `summary.json`.
 pub const CONVENTIONS: &str = "\
@@ -165,12 +176,40 @@ pub struct Skipped {
 pub struct FigureImage {
     pub caption: String,
     pub path: String,
+    /// The method the image shows (`noisy`, `reference`, a model, a baseline), in figures of methods.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub method: Option<String>,
+    /// The shares of pixels a difference picture marks.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub marks: Option<Marks>,
+}
+
+impl FigureImage {
+    /// An image that belongs to no method.
+    pub fn new(caption: impl Into<String>, path: impl Into<String>) -> FigureImage {
+        FigureImage { caption: caption.into(), path: path.into(), method: None, marks: None }
+    }
+}
+
+/// What a figure shows, so that readers of `summary.json` find it without reading its title.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum FigureKind {
+    /// Per method (and the reference), the crop of the window where the noisy input is worst.
+    Crops { view: String, spp: u32 },
+    /// Per method, its difference picture against the reference, with the shares of marked pixels.
+    Differences { view: String, spp: u32 },
+    /// Anything else (and every figure of a schema-2 summary).
+    #[default]
+    Other,
 }
 
 /// A row of captioned images under a title (e.g. the crops of one view).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Figure {
     pub title: String,
+    #[serde(default)]
+    pub kind: FigureKind,
     pub images: Vec<FigureImage>,
     /// A sentence under the images.
     #[serde(default)]
@@ -335,12 +374,39 @@ impl Report {
     }
 
     fn legend_markdown(&self) -> String {
-        let mut md = String::from("| color | method |\n|---|---|\n");
-        for (i, method) in self.methods().iter().filter(|m| **m != REFERENCE).enumerate() {
-            let (r, g, b) = crate::plot::series_color(i);
-            let _ = writeln!(md, "| #{r:02x}{g:02x}{b:02x} | {} |", md_text(method));
+        let doc = Document { blocks: vec![Block::Table(self.legend())], ..Document::default() };
+        doc.to_markdown().trim_end_matches('\n').to_string() + "\n"
+    }
+
+    /// The plots' colors: per method but the reference, `#rrggbb`.
+    pub fn legend(&self) -> Grid {
+        let methods: Vec<&str> = self.methods().into_iter().filter(|m| *m != REFERENCE).collect();
+        legend(&methods)
+    }
+
+    /// The error-against-time section for a document: what it shows, the plots of [`Self::write_error_vs_time`],
+    /// their legend and the comparisons over the views.
+    pub fn error_vs_time_blocks(&self) -> Vec<Block> {
+        let mut blocks = vec![Block::Paragraph(text(TRADEOFF_INTRO))];
+        let plots = ErrorMetric::ALL.map(|m| image(format!("{} against seconds", m.label()), Self::plot_file(m)));
+        blocks.push(Block::Paragraph(plots.concat()));
+        blocks.push(Block::Table(self.legend()));
+        if let Some(table) = self.overview_table() {
+            blocks.push(Block::Paragraph(text("Over the views:")));
+            blocks.push(Block::Table(Grid::of_table(&table)));
         }
-        md
+        blocks
+    }
+
+    /// Writes `error_vs_time.csv` and one plot per error metric into `dir` (which must exist), atomically.
+    pub fn write_error_vs_time(&self, dir: &Path) -> Result<()> {
+        write_file(&dir.join(Self::CSV_FILE), tradeoff::to_csv(&self.rows).as_bytes())?;
+        let methods: Vec<&str> = self.methods().into_iter().filter(|m| *m != REFERENCE).collect();
+        for metric in ErrorMetric::ALL {
+            let png = crate::plot::plot_error_vs_time(&self.rows, &methods, metric, 800, 560)?;
+            write_file(&dir.join(Self::plot_file(metric)), &png)?;
+        }
+        Ok(())
     }
 
     /// Mean of every metric per (method, spp) over the views, in order of first appearance; `view` is
@@ -409,17 +475,22 @@ impl Report {
             action: "create the report directory",
             source,
         })?;
-        write_file(&dir.join(Self::CSV_FILE), tradeoff::to_csv(&self.rows).as_bytes())?;
-        let methods: Vec<&str> = self.methods().into_iter().filter(|m| *m != REFERENCE).collect();
-        for metric in ErrorMetric::ALL {
-            let png = crate::plot::plot_error_vs_time(&self.rows, &methods, metric, 800, 560)?;
-            write_file(&dir.join(Self::plot_file(metric)), &png)?;
-        }
+        self.write_error_vs_time(dir)?;
         write_file(&dir.join(Self::JSON_FILE), self.to_json().as_bytes())?;
         write_file(&dir.join(Self::MARKDOWN_FILE), self.to_markdown().as_bytes())?;
         let html = crate::html::to_html(self, dir)?;
         write_file(&dir.join(Self::HTML_FILE), html.as_bytes())
     }
+}
+
+/// The colors of `methods` in plots (color `i` for `methods[i]`), `#rrggbb`.
+pub fn legend(methods: &[&str]) -> Grid {
+    let mut g = Grid::new(vec!["color".into(), "method".into()], vec![false, false]);
+    for (i, method) in methods.iter().enumerate() {
+        let (r, g_, b) = crate::plot::series_color(i);
+        g.rows.push(vec![text(format!("#{r:02x}{g_:02x}{b:02x}")), text(*method)]);
+    }
+    g
 }
 
 /// What the error-against-time section shows.
@@ -584,6 +655,6 @@ pub(crate) fn in_order<'a>(items: impl Iterator<Item = &'a str>) -> Vec<&'a str>
 }
 
 /// Text for a Markdown table cell or list item: `|` escaped, line breaks flattened.
-fn md_text(s: &str) -> String {
+pub(crate) fn md_text(s: &str) -> String {
     s.replace('|', "\\|").replace(['\n', '\r'], " ")
 }

@@ -41,6 +41,9 @@ pub enum Command {
     /// Measurements behind `cargo xtask bench net` (JSON on stdout).
     #[command(hide = true)]
     Bench(BenchArgs),
+    /// The reports of `cargo xtask sweep` from the plan it writes.
+    #[command(hide = true)]
+    SweepReport(crate::report_cmd::SweepReportArgs),
 }
 
 /// Camera and image overrides of `render`.

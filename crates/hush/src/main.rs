@@ -8,6 +8,7 @@ mod denoise_cmd;
 mod eval_cmd;
 mod progress;
 mod render_cmd;
+mod report_cmd;
 mod scene_cmd;
 mod train_cmd;
 
@@ -47,6 +48,7 @@ fn main() {
         cli::Command::Denoise(args) => denoise_cmd::run(args),
         cli::Command::Eval(args) => eval_cmd::run(args),
         cli::Command::Bench(args) => bench_cmd::run(args),
+        cli::Command::SweepReport(args) => report_cmd::run(args),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

@@ -1,14 +1,12 @@
 //! `cargo xtask sweep <name|all>`: the thesis's hyperparameter study (chapter 7) as resumable runs of
-//! `hush train` + `hush eval`, locally on N workers or as a Slurm job array, aggregated into
-//! `target/sweeps/<name>/<scale>/report.md` with each thesis claim reproduced, refuted or inconclusive.
+//! `hush train` + `hush eval`, locally on N workers or as a Slurm job array, aggregated by
+//! `hush sweep-report` (from the plan `plan.rs` writes) into `target/sweeps/<name>/<scale>/report.md` with each
+//! thesis claim reproduced, refuted or inconclusive.
 //!
 //! Definitions: `data/sweeps/scales.toml` and one `data/sweeps/<name>.toml` per sweep (see `spec`).
 
-mod claims;
 mod exec;
-mod plot;
-mod report;
-mod results;
+mod plan;
 mod slurm;
 mod slurm_selftest;
 mod spec;
@@ -16,10 +14,10 @@ mod spec;
 use std::path::{Path, PathBuf};
 
 use exec::{Layout, Outcome};
-use results::RunResult;
-use spec::{Run, Scale, Sweep};
+use spec::{Run, Scale};
 
-use crate::util::{Result, build_hush, ensure_vulkan, release, target_dir};
+use crate::args::{Flags, Takes};
+use crate::util::{Result, build_hush, ensure_vulkan, target_dir, write_atomic, write_atomic_with};
 
 pub const USAGE: &str =
     "  sweep <name|all> [--scale tiny|small|thesis] [--jobs N] [--release] [--hush PATH] [--out DIR]
@@ -58,69 +56,66 @@ enum Action {
     Collect,
 }
 
+/// The flags of `sweep`; the actions are exclusive.
+const FLAGS: [(&str, Takes); 11] = [
+    ("--scale", Takes::Value),
+    ("--jobs", Takes::Number),
+    ("--hush", Takes::Value),
+    ("--out", Takes::Value),
+    ("--cpus-per-task", Takes::Number),
+    ("--release", Takes::Nothing),
+    ("--list", Takes::Nothing),
+    ("--prepare", Takes::Nothing),
+    ("--collect", Takes::Nothing),
+    ("--run", Takes::Value),
+    ("--emit", Takes::Value),
+];
+const ACTIONS: [&str; 5] = ["--list", "--prepare", "--run", "--emit", "--collect"];
+
 fn parse(args: &[String]) -> Result<Options> {
-    let usage = || format!("usage: cargo xtask {}", USAGE.trim_start());
-    let mut it = args.iter();
-    let name = it.next().filter(|n| !n.starts_with("--")).ok_or_else(usage)?.clone();
-    let mut o = Options {
-        name,
-        scale: "tiny".into(),
-        jobs: None,
-        hush: None,
-        out: None,
-        cpus_per_task: None,
-        release: release(args),
-        action: Action::Sweep,
+    let usage = format!("cargo xtask {}", USAGE.trim_start());
+    let flags = Flags::parse(args, &FLAGS, 1, &usage)?;
+    let name = flags.positional.first().cloned().ok_or_else(|| format!("usage: {usage}"))?;
+    let positive = |flag: &str| -> Result<Option<usize>> {
+        let Some(v) = flags.value(flag) else { return Ok(None) };
+        v.parse().ok().filter(|&n| n > 0).map(Some).ok_or(format!("{flag} {v}: give a number ≥ 1"))
     };
-    let set = |o: &mut Options, a: Action| {
-        if o.action != Action::Sweep {
-            return Err(format!("give only one of --list, --prepare, --run, --emit, --collect\n{}", usage()));
-        }
-        o.action = a;
-        Ok(())
-    };
-    while let Some(a) = it.next() {
-        let mut value = || it.next().cloned().ok_or_else(|| format!("{a} needs a value\n{}", usage()));
-        match a.as_str() {
-            "--scale" => o.scale = value()?,
-            "--jobs" => {
-                let v = value()?;
-                o.jobs = Some(v.parse().ok().filter(|&n| n > 0).ok_or(format!("--jobs {v}: give a number ≥ 1"))?);
-            }
-            "--hush" => o.hush = Some(PathBuf::from(value()?)),
-            "--out" => o.out = Some(PathBuf::from(value()?)),
-            "--cpus-per-task" => {
-                let v = value()?;
-                let n = v.parse().ok().filter(|&n| n > 0).ok_or(format!("--cpus-per-task {v}: give a number ≥ 1"))?;
-                o.cpus_per_task = Some(n);
-            }
-            "--release" => {}
-            "--list" => set(&mut o, Action::List)?,
-            "--prepare" => set(&mut o, Action::Prepare)?,
-            "--collect" => set(&mut o, Action::Collect)?,
-            "--run" => {
-                let v = value()?;
-                let i = v.parse().map_err(|_| format!("--run {v}: give a run index (see --list)"))?;
-                set(&mut o, Action::Run(i))?
-            }
-            "--emit" => match value()?.as_str() {
-                "slurm" => set(&mut o, Action::EmitSlurm)?,
-                other => return Err(format!("--emit {other}: only `slurm` is supported")),
-            },
-            other => return Err(format!("unknown option {other}\n{}", usage())),
-        }
+    let actions = flags.given_of(&ACTIONS);
+    if actions.len() > 1 {
+        return Err(format!("give only one of {}\nusage: {usage}", ACTIONS.join(", ")));
     }
-    Ok(o)
+    let action = match actions.first().copied() {
+        None => Action::Sweep,
+        Some("--list") => Action::List,
+        Some("--prepare") => Action::Prepare,
+        Some("--collect") => Action::Collect,
+        Some("--run") => {
+            let v = flags.value("--run").expect("given");
+            Action::Run(v.parse().map_err(|_| format!("--run {v}: give a run index (see --list)"))?)
+        }
+        Some(_) => match flags.value("--emit").expect("given") {
+            "slurm" => Action::EmitSlurm,
+            other => return Err(format!("--emit {other}: only `slurm` is supported")),
+        },
+    };
+    Ok(Options {
+        name,
+        scale: flags.value("--scale").unwrap_or("tiny").into(),
+        jobs: positive("--jobs")?,
+        hush: flags.value("--hush").map(PathBuf::from),
+        out: flags.value("--out").map(PathBuf::from),
+        cpus_per_task: positive("--cpus-per-task")?,
+        release: flags.has("--release"),
+        action,
+    })
 }
 
-/// Copies `exe` to `bin/<name>` (temp + rename), so that rebuilding the workspace while a sweep runs
-/// never swaps the binary under its workers.
+/// Copies `exe` to `bin/<name>` atomically, so that rebuilding the workspace while a sweep runs never swaps
+/// the binary under its workers.
 fn stable_copy(exe: &Path, bin: &Path, name: &str) -> Result<PathBuf> {
-    std::fs::create_dir_all(bin).map_err(|e| format!("{}: {e}", bin.display()))?;
     let dest = bin.join(name);
-    let tmp = bin.join(format!(".{name}.tmp"));
-    std::fs::copy(exe, &tmp).map_err(|e| format!("copying {} to {}: {e}", exe.display(), tmp.display()))?;
-    std::fs::rename(&tmp, &dest).map_err(|e| format!("{}: {e}", dest.display()))?;
+    write_atomic_with(&dest, |tmp| std::fs::copy(exe, tmp).map(drop))
+        .map_err(|e| format!("copying {}: {e}", exe.display()))?;
     Ok(dest)
 }
 
@@ -130,24 +125,6 @@ fn hush(o: &Options, layout: &Layout) -> Result<PathBuf> {
         Some(p) => Err(format!("--hush {}: no such file", p.display())),
         None => stable_copy(&build_hush(o.release)?, &layout.root.join("bin"), "hush"),
     }
-}
-
-fn collect(sweeps: &[Sweep], scale: &Scale, runs: &[Run], layout: &Layout) -> Result<()> {
-    let mut all = Vec::new();
-    let results: Vec<RunResult> = runs.iter().map(|r| RunResult::load(r, &layout.run(r, &scale.name))).collect();
-    for sweep in sweeps {
-        let mine: Vec<RunResult> = results.iter().filter(|r| r.run.sweep == sweep.name).cloned().collect();
-        let dir = layout.sweep(&sweep.name, &scale.name);
-        let claims = report::write(sweep, scale, &mine, &dir)?;
-        println!("report: {}", dir.join("report.md").display());
-        all.push((sweep.name.clone(), claims));
-    }
-    if sweeps.len() > 1 {
-        let dir = layout.sweep("all", &scale.name);
-        report::write_all(scale, &all, &results, &dir)?;
-        println!("report: {}", dir.join("report.md").display());
-    }
-    Ok(())
 }
 
 /// Writes the Slurm job-array script of the sweep and returns its path.
@@ -172,7 +149,7 @@ fn emit_slurm(o: &Options, scale: &Scale, runs: usize, layout: &Layout, hush: &P
         out: &layout.root,
     });
     let path = dir.join("sweep.sbatch");
-    std::fs::write(&path, script).map_err(|e| format!("{}: {e}", path.display()))?;
+    write_atomic(&path, &script)?;
     Ok(path)
 }
 
@@ -210,7 +187,7 @@ fn slurm_selftest(mut o: Options) -> Result<()> {
             script.with_file_name("slurm-*.out").display()
         ));
     }
-    collect(&sweeps, &scale, &runs, &layout)?;
+    plan::report(&hush, &sweeps, &scale, &runs, &layout)?;
     println!("slurm-selftest: {} array tasks completed every run in {seconds:.1} s", runs.len());
     Ok(())
 }
@@ -236,7 +213,7 @@ pub fn run(args: &[String]) -> Result<()> {
             }
             Ok(())
         }
-        Action::Collect => collect(&sweeps, &scale, &runs, &layout),
+        Action::Collect => plan::report(&hush(&o, &layout)?, &sweeps, &scale, &runs, &layout),
         Action::Prepare => {
             ensure_vulkan()?;
             exec::prepare_dataset(&hush(&o, &layout)?, &scale, &layout).map(drop)
@@ -292,7 +269,7 @@ pub fn run(args: &[String]) -> Result<()> {
                 })
                 .collect();
             let outcomes = exec::run_all(&hush, &jobs, &elsewhere, workers, threads);
-            collect(&sweeps, &scale, &runs, &layout)?;
+            plan::report(&hush, &sweeps, &scale, &runs, &layout)?;
             let failed: Vec<String> = runs
                 .iter()
                 .zip(&outcomes)

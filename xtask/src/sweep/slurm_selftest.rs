@@ -100,7 +100,7 @@ pub fn start(dir: &Path) -> Result<(Daemons, std::path::PathBuf)> {
     .to_string();
     let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
     let conf = dir.join("slurm.conf");
-    std::fs::write(&conf, slurm_conf(&host, cpus, dir)).map_err(|e| format!("{}: {e}", conf.display()))?;
+    crate::util::write_atomic(&conf, &slurm_conf(&host, cpus, dir))?;
 
     let mut daemons = Daemons(Vec::new());
     if !munge_works() {

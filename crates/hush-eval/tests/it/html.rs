@@ -5,7 +5,7 @@ use std::path::Path;
 use std::process::Command;
 
 use hush_eval::html::{base64, escape_html};
-use hush_eval::{Figure, FigureImage, Report, Row};
+use hush_eval::{Figure, FigureImage, FigureKind, Report, Row};
 
 use crate::TempDir;
 
@@ -45,8 +45,9 @@ fn hostile_report(dir: &Path) -> Report {
     std::fs::create_dir_all(dir.join("pictures")).unwrap();
     std::fs::write(dir.join("pictures/x.png"), png).unwrap();
     r.figures.push(Figure {
+        kind: FigureKind::Other,
         title: "crops \"quoted\"".into(),
-        images: vec![FigureImage { caption: "noisy <i>".into(), path: "pictures/x.png".into() }],
+        images: vec![FigureImage::new("noisy <i>", "pictures/x.png")],
         note: "note".into(),
     });
     r

@@ -9,6 +9,8 @@ mod metrics;
 mod pictures;
 mod reference_checks;
 mod report;
+mod sweep;
+mod sweep_claims;
 mod timing;
 mod tonemap;
 mod tradeoff;

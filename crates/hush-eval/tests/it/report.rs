@@ -1,4 +1,4 @@
-use hush_eval::{CONVENTIONS, Figure, FigureImage, Metrics, Report, Row, SCHEMA, Skipped};
+use hush_eval::{CONVENTIONS, Figure, FigureImage, FigureKind, Metrics, Report, Row, SCHEMA, Skipped};
 
 use crate::TempDir;
 
@@ -114,8 +114,9 @@ fn a_figure_whose_file_is_missing_is_an_error_naming_it() {
     let dir = TempDir::new("missing-figure");
     let mut r = report();
     r.figures.push(Figure {
+        kind: FigureKind::Other,
         title: "crops".into(),
-        images: vec![FigureImage { caption: "noisy".into(), path: "pictures/gone.png".into() }],
+        images: vec![FigureImage::new("noisy", "pictures/gone.png")],
         note: String::new(),
     });
     let err = r.write(dir.path()).unwrap_err().to_string();
@@ -135,4 +136,20 @@ fn plots_draw_each_method_in_its_color_and_label_the_axes() {
         |c: (u8, u8, u8), x_max: u32| picture.enumerate_pixels().any(|(x, _, p)| x < x_max && p.0 == [c.0, c.1, c.2]);
     assert!(has(hush_eval::series_color(1), 400), "the denoiser's dot");
     assert!(has((0, 0, 0), 48), "the error axis labels");
+}
+
+/// A figure's kind and its images' methods and marks survive `summary.json`; a schema-2 figure has none.
+#[test]
+fn figure_kinds_round_trip_and_old_figures_have_none() {
+    let mut r = report();
+    let marks = hush_eval::pictures::Marks { over_low: 0.25, over_high: 0.125 };
+    let image = FigureImage { method: Some("noisy".into()), marks: Some(marks), ..FigureImage::new("noisy", "p.png") };
+    let kind = FigureKind::Differences { view: "v".into(), spp: 4 };
+    r.figures.push(Figure { title: "v at 4 spp".into(), kind, images: vec![image], note: String::new() });
+    let json = r.to_json();
+    assert!(json.contains("\"type\": \"differences\""), "{json}");
+    let back: Report = serde_json::from_str(&json).unwrap();
+    assert_eq!(back.figures, r.figures);
+    let old: Figure = serde_json::from_str(r#"{"title": "t", "images": [{"caption": "c", "path": "p"}]}"#).unwrap();
+    assert_eq!((old.kind, old.images[0].method.clone(), old.images[0].marks), (FigureKind::Other, None, None));
 }

@@ -6,7 +6,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use hush_dataset::{Image, write_atomic};
 use hush_eval::pictures::{self, Rgb8};
-use hush_eval::{Figure, FigureImage, NOISY, REFERENCE};
+use hush_eval::{Figure, FigureImage, FigureKind, NOISY, REFERENCE};
 
 /// The crops side by side (each output, then the reference) and the difference pictures of one view,
 /// written to `dir` (`pictures/` of the report).
@@ -34,18 +34,23 @@ pub(crate) fn pictures_of(
     for (method, image) in outputs.iter().map(|(m, i)| (m.as_str(), i)).chain([(REFERENCE, reference)]) {
         let crop = Rgb8::tonemapped(image, exposure)?.crop(x, y, side, side).upscale(zoom);
         let path = write(format!("{view}_{spp:06}_{}_crop.png", file_safe(method)), &crop)?;
-        crops.push(FigureImage { caption: method.to_string(), path });
+        crops.push(FigureImage { method: Some(method.to_string()), ..FigureImage::new(method, path) });
         if method != REFERENCE {
             let (picture, marks) = pictures::error_marks(image, reference, exposure)?;
             let path = write(format!("{view}_{spp:06}_{}_diff.png", file_safe(method)), &picture.upscale(diff_zoom))?;
             let caption =
                 format!("{method}: {:.1} % > 3 %, {:.1} % > 10 %", 100.0 * marks.over_low, 100.0 * marks.over_high);
-            diffs.push(FigureImage { caption, path });
+            diffs.push(FigureImage {
+                method: Some(method.to_string()),
+                marks: Some(marks),
+                ..FigureImage::new(caption, path)
+            });
         }
     }
     Ok(vec![
         Figure {
             title: format!("{view} at {spp} spp: crops"),
+            kind: FigureKind::Crops { view: view.to_string(), spp },
             images: crops,
             note: format!(
                 "The {side}×{side} window at ({x}, {y}) where the noisy input is worst, tonemapped as the metrics \
@@ -54,6 +59,7 @@ pub(crate) fn pictures_of(
         },
         Figure {
             title: format!("{view} at {spp} spp: pixels off by more than 3 % and 10 %"),
+            kind: FigureKind::Differences { view: view.to_string(), spp },
             images: diffs,
             note: "Yellow: the tonemapped value of some channel is off by more than 3 % of the range; red: by more \
                    than 10 % (the thresholds of the thesis's figures 7.7 and 7.3); grey: the reference, dimmed."

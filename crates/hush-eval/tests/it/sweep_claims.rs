@@ -1,0 +1,104 @@
+//! The thesis's claims decided from runs (moved with the claims from xtask).
+
+use std::path::Path;
+
+use hush_eval::sweep::claims::{Claim, Paired, Verdict, claims};
+use hush_eval::sweep::results::{Epoch, EvalRow, RunResult};
+
+#[test]
+fn the_decision_rule() {
+    // Mean 1, SE = sd/√n = 0.1/√4 = 0.05: clearly in the thesis's direction.
+    let clear = Paired::of(&[0.9, 1.1, 0.9, 1.1]);
+    assert!((clear.se - 0.0577).abs() < 1e-3, "{clear:?}");
+    assert_eq!(clear.direction(), Verdict::Reproduced);
+    assert_eq!(Paired::of(&[-0.9, -1.1, -0.9, -1.1]).direction(), Verdict::Refuted);
+    // Mean 0.1 against SE 0.5: noise.
+    assert_eq!(Paired::of(&[1.1, -0.9, 0.6, -0.4]).direction(), Verdict::Inconclusive);
+    assert_eq!(Paired::of(&[5.0]).direction(), Verdict::Inconclusive);
+    assert_eq!(Paired::of(&[]).direction(), Verdict::Inconclusive);
+    // No-effect claims against a margin of 0.5.
+    assert_eq!(Paired::of(&[0.1, 0.0, 0.1, 0.0]).within(0.5), Verdict::Reproduced);
+    assert_eq!(clear.within(0.5), Verdict::Refuted);
+    assert_eq!(Paired::of(&[0.5, 0.3, 0.5, 0.3]).within(0.5), Verdict::Inconclusive);
+}
+
+fn result(group: &str, psnr: &[(u64, f64)], epochs: &[(usize, f64, f64)]) -> RunResult {
+    let run = crate::sweep::run("s", group, Path::new("s"));
+    let eval = psnr
+        .iter()
+        .enumerate()
+        .map(|(i, &(spp, p))| EvalRow {
+            view: format!("v{}", i / 2),
+            method: "train/model".into(),
+            spp,
+            psnr: Some(p),
+            ssim: None,
+            mae: None,
+            rel_mse: None,
+            render_seconds: None,
+            denoise_seconds: None,
+            preview: None,
+            seconds: None,
+        })
+        .collect();
+    let epochs = epochs
+        .iter()
+        .map(|&(epoch, tr, te)| Epoch { epoch, train_loss: tr, test_loss: Some(te), seconds: epoch as f64 })
+        .collect();
+    RunResult { run, done: true, epochs, eval, pictures: vec![] }
+}
+
+#[test]
+fn features_matter_most_at_low_spp() {
+    // Two views at 4 and 64 spp: features gain ~3 dB at 4 spp and ~0.5 dB at 64.
+    let n = result("n", &[(4, 20.0), (64, 30.0), (4, 21.0), (64, 31.0), (4, 19.0), (64, 29.5)], &[]);
+    let ann = result("ann", &[(4, 23.0), (64, 30.5), (4, 24.2), (64, 31.4), (4, 21.9), (64, 30.1)], &[]);
+    let claims = claims("features", &[n, ann]);
+    assert_eq!(claims[0].verdict, Verdict::Reproduced, "{claims:?}");
+    assert_eq!(claims[1].verdict, Verdict::NotMeasured);
+    assert_eq!(claims[2].verdict, Verdict::Reproduced, "{:?}", claims[2]);
+    assert!(claims[2].measured.contains("at 4 spp"), "{}", claims[2].measured);
+    // Features that hurt everywhere, less so at low spp: nothing to matter most.
+    let worse = result("ann", &[(4, 19.0), (64, 29.0), (4, 20.0), (64, 30.0), (4, 18.0), (64, 28.5)], &[]);
+    let n = result("n", &[(4, 20.0), (64, 31.0), (4, 21.0), (64, 32.0), (4, 19.0), (64, 30.5)], &[]);
+    assert_eq!(hush_eval::sweep::claims::claims("features", &[n, worse])[2].verdict, Verdict::Inconclusive);
+}
+
+/// The patch MLP against OIDN's U-Net: quality by paired PSNR, speed by the mean denoise seconds.
+#[test]
+fn the_patch_mlp_against_the_unet() {
+    let timed = |group: &str, psnr: &[(u64, f64)], seconds: f64| {
+        let mut r = result(group, psnr, &[]);
+        r.eval.iter_mut().for_each(|row| row.denoise_seconds = Some(seconds));
+        r
+    };
+    let oidn = timed("oidn", &[(4, 25.0), (16, 26.0), (64, 24.0)], 0.2);
+    let find = |c: &[Claim], what: &str| c.iter().find(|c| c.thesis.contains(what)).cloned().expect(what);
+    let c = claims("architecture", &[oidn.clone(), timed("mlp", &[(4, 17.0), (16, 18.5), (64, 16.0)], 0.1)]);
+    assert_eq!(find(&c, "CNN denoises better").verdict, Verdict::Reproduced);
+    let slow = find(&c, "denoises slowly");
+    assert_eq!(slow.verdict, Verdict::Refuted, "{slow:?}");
+    assert!(slow.measured.contains("oidn 0.200, mlp 0.100 (×0.50)"), "{}", slow.measured);
+    let c = claims("architecture", &[oidn.clone(), timed("mlp", &[(4, 26.0), (16, 27.5), (64, 25.0)], 0.5)]);
+    assert_eq!(find(&c, "CNN denoises better").verdict, Verdict::Refuted);
+    assert_eq!(find(&c, "denoises slowly").verdict, Verdict::Reproduced);
+    let c = claims("architecture", &[oidn, timed("mlp", &[(4, 25.0), (16, 26.5), (64, 23.0)], 0.21)]);
+    assert_eq!(find(&c, "CNN denoises better").verdict, Verdict::Inconclusive);
+    assert_eq!(find(&c, "denoises slowly").verdict, Verdict::Inconclusive);
+    assert_eq!(find(&claims("architecture", &[]), "denoises slowly").verdict, Verdict::NotMeasured);
+}
+
+#[test]
+fn overfitting_is_read_from_the_test_loss_curve() {
+    let turn = [(1, 0.5, 0.5), (2, 0.3, 0.3), (3, 0.2, 0.31), (4, 0.1, 0.36), (5, 0.05, 0.4), (6, 0.04, 0.45)];
+    assert_eq!(claims("epochs", &[result("base", &[], &turn)])[0].verdict, Verdict::Reproduced);
+    // Still falling at the end: too short to tell.
+    let falling = [(1, 0.5, 0.5), (2, 0.4, 0.4), (3, 0.3, 0.3), (4, 0.2, 0.2), (5, 0.1, 0.1)];
+    let c = claims("epochs", &[result("base", &[], &falling)]);
+    assert_eq!(c[0].verdict, Verdict::Inconclusive);
+    assert!(c[0].measured.contains("best test loss 0.1000 at epoch 5 of 5"), "{}", c[0].measured);
+    // Flat at its best over the last fifth: converged without overfitting.
+    let flat = [(2, 0.5, 0.5), (4, 0.3, 0.3), (6, 0.25, 0.2), (8, 0.2, 0.2), (10, 0.2, 0.2), (12, 0.2, 0.2)];
+    let flat: Vec<_> = flat.iter().map(|&(e, tr, te)| (e, tr, te - 1e-4 * e as f64)).collect();
+    assert_eq!(claims("epochs", &[result("base", &[], &flat)])[0].verdict, Verdict::Refuted);
+}
