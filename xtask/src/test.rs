@@ -9,7 +9,14 @@ use crate::util::{Result, ensure_vulkan, project_root, spawn, target_dir};
 pub fn run(args: &[String]) -> Result<()> {
     ensure_vulkan()?;
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    spawn(Command::new(cargo).current_dir(project_root()).args(["test", "--workspace"]).args(args))?;
+    let mut test = Command::new(cargo);
+    test.current_dir(project_root()).args(["test", "--workspace"]).args(args);
+    // As `hush` does for itself: Mesa's device-selection layer would ask a window system for the default GPU
+    // in every test that opens one, and libwayland print "XDG_RUNTIME_DIR is invalid" on a headless machine.
+    if std::env::var_os("NODEVICE_SELECT").is_none() && std::env::var_os("MESA_VK_DEVICE_SELECT").is_none() {
+        test.env("NODEVICE_SELECT", "1");
+    }
+    spawn(&mut test)?;
     if !args.is_empty() {
         // A filtered test run (`cargo xtask test <filter>`) is not the whole suite.
         return Ok(());
