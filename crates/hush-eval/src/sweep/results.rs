@@ -1,24 +1,15 @@
-//! What a run left behind: `train/metrics.csv` (loss per epoch, columns found by their header) and
+//! What a run left behind: `train/metrics.csv` (loss per epoch, read by hush-train's own reader) and
 //! `eval/summary.json` (deserialized: schema 1 with `seconds`, schemas 2 and 3 with `render_seconds` and
 //! `denoise_seconds`; the crops and difference pictures found by their figure's [`FigureKind`]).
 
 use std::path::Path;
 
+use hush_train::{EpochRow, parse_metrics_csv};
 use serde::Deserialize;
 
 use super::PlanRun;
 use crate::pictures::Marks;
 use crate::{Error, Figure, FigureImage, FigureKind, NOISY, REFERENCE, Result, Row};
-
-/// One row of `metrics.csv`.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Epoch {
-    pub epoch: usize,
-    pub train_loss: f64,
-    pub test_loss: Option<f64>,
-    /// Seconds since the training (or its resumed part) started.
-    pub seconds: f64,
-}
 
 /// One row of `eval/summary.json`, of any schema: every metric optional (rows of old reports lack some).
 #[derive(Clone, Debug, Default, PartialEq, Deserialize)]
@@ -99,31 +90,9 @@ pub struct Picture {
 pub struct RunResult {
     pub run: PlanRun,
     pub done: bool,
-    pub epochs: Vec<Epoch>,
+    pub epochs: Vec<EpochRow>,
     pub eval: Vec<EvalRow>,
     pub pictures: Vec<Picture>,
-}
-
-/// The rows of `metrics.csv`, its columns found by name (`epoch`, `train_loss`, `test_loss`, `seconds`);
-/// rows that do not parse are left out.
-pub fn parse_metrics_csv(text: &str) -> Vec<Epoch> {
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
-    let col = |name: &str| header.iter().position(|h| h.trim() == name);
-    let (Some(e), Some(tr)) = (col("epoch"), col("train_loss")) else { return Vec::new() };
-    let (te, s) = (col("test_loss"), col("seconds"));
-    lines
-        .filter_map(|l| {
-            let f: Vec<&str> = l.split(',').collect();
-            let num = |i: Option<usize>| i.and_then(|i| f.get(i)?.trim().parse::<f64>().ok());
-            Some(Epoch {
-                epoch: f.get(e)?.trim().parse().ok()?,
-                train_loss: num(Some(tr))?,
-                test_loss: num(te),
-                seconds: num(s).unwrap_or(f64::NAN),
-            })
-        })
-        .collect()
 }
 
 /// The rows of an evaluation summary (`summary.json`, any schema).

@@ -5,9 +5,10 @@ use std::path::{Path, PathBuf};
 use hush_eval::doc::{Block, Document, Grid, Inline, image, text};
 use hush_eval::pictures::{Marks, Rgb8};
 use hush_eval::sweep::claims::Verdict;
-use hush_eval::sweep::results::{Epoch, EvalRow, Picture, RunResult, parse_eval, parse_metrics_csv, parse_pictures};
+use hush_eval::sweep::results::{EvalRow, Picture, RunResult, parse_eval, parse_pictures};
 use hush_eval::sweep::{Plan, PlanRun, PlanScale, PlanSweep, read_plan, report, write_reports};
 use hush_eval::{FigureImage, FigureKind};
+use hush_train::{EpochRow, parse_metrics_csv};
 
 use crate::TempDir;
 
@@ -16,8 +17,13 @@ pub fn run(sweep: &str, name: &str, dir: &Path) -> PlanRun {
     PlanRun { sweep: sweep.into(), name: name.into(), group: name.into(), dir: dir.to_path_buf(), ..PlanRun::default() }
 }
 
-fn result(run: PlanRun, epochs: Vec<Epoch>, eval: Vec<EvalRow>, pictures: Vec<Picture>) -> RunResult {
+fn result(run: PlanRun, epochs: Vec<EpochRow>, eval: Vec<EvalRow>, pictures: Vec<Picture>) -> RunResult {
     RunResult { run, done: true, epochs, eval, pictures }
+}
+
+/// A row of `metrics.csv` with what the sweep reads of it.
+pub fn epoch(epoch: usize, train_loss: f64, test_loss: Option<f64>, seconds: f64) -> EpochRow {
+    EpochRow { epoch, step: 2 * epoch, train_loss, test_loss, lr: 1e-3, seconds, loader_share: 0.0, best: false }
 }
 
 fn png(path: &Path) {
@@ -38,8 +44,8 @@ fn metrics_csv_with_gaps_and_a_resume() {
     assert_eq!(r.best(), Some((1, 0.6)));
     assert_eq!(r.last_tested(), Some((3, 0.3, 0.7)));
     // Columns are found by name, in any order.
-    let moved = parse_metrics_csv("seconds,train_loss,epoch\n4,0.25,7\n");
-    assert_eq!(moved, [Epoch { epoch: 7, train_loss: 0.25, test_loss: None, seconds: 4.0 }]);
+    let moved = parse_metrics_csv("seconds,lr,train_loss,step,epoch\n4,0.001,0.25,14,7\n");
+    assert_eq!(moved, [epoch(7, 0.25, None, 4.0)]);
 }
 
 #[test]
@@ -142,7 +148,7 @@ fn a_report_with_a_missing_run() {
     let results = vec![
         result(
             run("architecture", "oidn", &dir.join("oidn")),
-            vec![Epoch { epoch: 1, train_loss: 0.5, test_loss: Some(0.6), seconds: 3.0 }],
+            vec![epoch(1, 0.5, Some(0.6), 3.0)],
             vec![row("noisy", 20.0), row("train/model", 25.0)],
             vec![
                 picture("crops", "reference", "r.png", None),

@@ -3,7 +3,9 @@
 use std::path::Path;
 
 use hush_eval::sweep::claims::{Claim, Paired, Verdict, claims};
-use hush_eval::sweep::results::{Epoch, EvalRow, RunResult};
+use hush_eval::sweep::results::{EvalRow, RunResult};
+
+use crate::sweep::epoch;
 
 #[test]
 fn the_decision_rule() {
@@ -41,10 +43,7 @@ fn result(group: &str, psnr: &[(u64, f64)], epochs: &[(usize, f64, f64)]) -> Run
             seconds: None,
         })
         .collect();
-    let epochs = epochs
-        .iter()
-        .map(|&(epoch, tr, te)| Epoch { epoch, train_loss: tr, test_loss: Some(te), seconds: epoch as f64 })
-        .collect();
+    let epochs = epochs.iter().map(|&(e, tr, te)| epoch(e, tr, Some(te), e as f64)).collect();
     RunResult { run, done: true, epochs, eval, pictures: vec![] }
 }
 

@@ -18,6 +18,13 @@ use hush_train::{EpochRow, LossRow, loss_csv, metrics_csv, parse_loss_csv, parse
 use super::RunConfig;
 
 /// The files of a run folder.
+///
+/// ```
+/// let run = hush_pipeline::RunFolder::new("runs/a");
+/// assert_eq!(run.last_checkpoint(), std::path::Path::new("runs/a/checkpoints/last.safetensors"));
+/// assert_eq!(run.epoch_checkpoint(7), std::path::Path::new("runs/a/checkpoints/epoch_0007.safetensors"));
+/// assert_eq!(run.read_config().unwrap(), None, "no config.json: not a run yet");
+/// ```
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct RunFolder {
     pub dir: PathBuf,
