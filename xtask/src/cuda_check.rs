@@ -32,7 +32,7 @@ const WHEELS: [&str; 5] = [
 /// The GPU architecture compiled for when `CUDA_COMPUTE_CAP` is not set (Ampere; CUDA 13 needs 75 or more).
 const DEFAULT_COMPUTE_CAP: &str = "80";
 /// The packages whose `cuda` feature is checked, with every target (tests, benches, the e2e tests).
-const PACKAGES: [&str; 3] = ["hush-net", "hush-train", "hush"];
+const PACKAGES: [&str; 4] = ["hush-net", "hush-train", "hush-pipeline", "hush"];
 
 pub fn run(args: &[String]) -> Result<()> {
     crate::args::Flags::parse(args, &[], 0, "cargo xtask cuda-check (CUDA_COMPUTE_CAP and NVCC_CCBIN are read)")?;
