@@ -21,7 +21,8 @@ use crate::shared_reference;
 const GOLDEN_DB: f64 = 80.0;
 
 fn weights(name: &str) -> Vec<u8> {
-    let path = shared_reference("").join(format!("../weights/oidn-2.5.1/{name}.tza"));
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../data/weights/oidn-2.5.1/{name}.tza"));
     std::fs::read(&path).unwrap_or_else(|e| panic!("reading {}: {e}", path.display()))
 }
 

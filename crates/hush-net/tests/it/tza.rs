@@ -1,4 +1,4 @@
-//! TZA import and export, against OIDN's official weight files (`shared/weights/oidn-2.5.1/`) and
+//! TZA import and export, against OIDN's official weight files (`data/weights/oidn-2.5.1/`) and
 //! hand-made archives.
 
 use candle_core::{DType, Device, Module, Result};
@@ -15,9 +15,9 @@ const OFFICIAL: [&str; 5] =
 
 fn official(name: &str) -> Vec<u8> {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/weights/oidn-2.5.1")
+        .join("../../data/weights/oidn-2.5.1")
         .join(format!("{name}.tza"));
-    std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e} (shared/ sits beside the repository)", path.display()))
+    std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
 /// OIDN's files: import → export gives the very same bytes (f16 → f32 → f16 is exact; same order,

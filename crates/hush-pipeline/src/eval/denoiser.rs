@@ -88,15 +88,19 @@ mod tests {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared").join(path)
     }
 
+    fn weights(name: &str) -> std::path::PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/weights/oidn-2.5.1").join(name)
+    }
+
     /// `hush denoise --model rt_hdr_alb_nrm.tza`: the features come from the channel count, the kind from
     /// the tensor names; inputs of the wrong size or channel count are clear errors. (The image itself is
     /// checked against OIDN in hush-eval's golden test.)
     #[test]
     fn loads_oidn_weights_and_checks_inputs() {
-        let model = Denoiser::load(&shared("weights/oidn-2.5.1/rt_hdr_alb_nrm.tza")).unwrap();
+        let model = Denoiser::load(&weights("rt_hdr_alb_nrm.tza")).unwrap();
         assert_eq!(model.features(), &[Feature::Albedo, Feature::Normal]);
         assert_eq!(model.info.net.as_unet().map(|c| c.kind), Some(hush_net::UNetKind::Unet));
-        let small = Denoiser::load(&shared("weights/oidn-2.5.1/rt_hdr_alb_nrm_small.tza")).unwrap();
+        let small = Denoiser::load(&weights("rt_hdr_alb_nrm_small.tza")).unwrap();
         assert_eq!(small.info.net.as_unet().map(|c| c.kind), Some(hush_net::UNetKind::UnetSmall));
 
         let read = |name: &str| {
@@ -117,7 +121,7 @@ mod tests {
         let err = model.denoise(&grey, &[&albedo, &normal]).unwrap_err().to_string();
         assert!(err.contains("1 channels"), "{err}");
 
-        let err = Denoiser::load(&shared("weights/oidn-2.5.1/README.md")).map(|_| ()).unwrap_err();
+        let err = Denoiser::load(&weights("README.md")).map(|_| ()).unwrap_err();
         assert!(format!("{err:#}").contains("README.md"), "{err:#}");
     }
 }
