@@ -117,8 +117,5 @@ pub fn render(
         }
     })?;
     bar.finish_and_clear();
-    if out.discarded_samples > 0 {
-        eprintln!("warning: {label}: {} non-finite path samples were discarded", out.discarded_samples);
-    }
     Ok(out)
 }

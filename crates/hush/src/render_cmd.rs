@@ -33,6 +33,9 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let settings = RenderSettings { spp, seed: args.seed };
     let out = crate::progress::render(&renderer, &scene, &settings, time_limit, "render")?;
     let cpu = cpu_seconds() - cpu0;
+    if out.discarded_samples > 0 {
+        eprintln!("warning: render: {} non-finite path samples were discarded", out.discarded_samples);
+    }
     eprintln!("scene data written into the kernel: {}", out.literals);
     write_exr(
         &args.out,

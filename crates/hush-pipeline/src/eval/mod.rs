@@ -57,22 +57,21 @@ impl EvalPlan {
 /// Evaluates the methods `plan` asks for on the test split of its dataset and writes the report into
 /// `plan.out`; returns the report.
 pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
-    let args = plan;
-    let manifest = Manifest::load(&args.dataset)?;
+    let manifest = Manifest::load(&plan.dataset)?;
     let views: Vec<_> = manifest.split(Split::Test).cloned().collect();
     if views.is_empty() {
-        bail!("{} has no test views: render the dataset with --test-views 1 or more", args.dataset.display());
+        bail!("{} has no test views: render the dataset with --test-views 1 or more", plan.dataset.display());
     }
     let mut report = Report::default();
     let mut methods: Vec<Box<dyn Method>> = vec![Box::new(Noisy)];
-    for path in &args.models {
+    for path in &plan.models {
         let (name, denoiser) = (method_name(path), Denoiser::load(path)?);
         let info = &denoiser.info;
         report.notes.push(format!("Model {name}: {} on features {}.", info.net.describe(), info.features));
         methods.push(Box::new(Model { name, denoiser }));
     }
     let all: Vec<String> = BASELINES.iter().map(|(name, _)| name.to_string()).collect();
-    let baselines = if args.baselines.iter().any(|b| b == "all") { &all } else { &args.baselines };
+    let baselines = if plan.baselines.iter().any(|b| b == "all") { &all } else { &plan.baselines };
     for name in baselines {
         if let Some(method) = baseline(name)? {
             methods.push(method);
@@ -83,20 +82,20 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
             bail!("two methods are called '{}': give the models distinct folder or file names", m.name());
         }
     }
-    let previews = args.out.join("previews");
-    let picture_dir = args.out.join("pictures");
+    let previews = plan.out.join("previews");
+    let picture_dir = plan.out.join("pictures");
     for dir in [&previews, &picture_dir] {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
 
-    report.notes.insert(0, format!("Dataset: {}; test views: {}.", args.dataset.display(), views.len()));
+    report.notes.insert(0, format!("Dataset: {}; test views: {}.", plan.dataset.display(), views.len()));
     report.notes.push(format!(
         "Machine: {}{} logical CPUs{}; denoise time is the median of {} warm runs on {}; render times are those \
          the dataset's manifest recorded on the machine that rendered it.",
         cpu_model().map(|m| format!("{m}, ")).unwrap_or_default(),
         std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
         std::env::var("RAYON_NUM_THREADS").map(|n| format!(", RAYON_NUM_THREADS={n}")).unwrap_or_default(),
-        args.timing_runs.max(1),
+        plan.timing_runs.max(1),
         if cfg!(feature = "cuda") { "CUDA" } else { "the CPU" }
     ));
     report.notes.push("PNG previews of every image are in previews/ beside report.md.".into());
@@ -104,13 +103,13 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
     for view in &views {
         let name = format!("{}_{}", view.scene, view.view);
         let spps: Vec<u32> =
-            view.noisy.iter().map(|r| r.spp).filter(|s| args.spp.is_empty() || args.spp.contains(s)).collect();
+            view.noisy.iter().map(|r| r.spp).filter(|s| plan.spp.is_empty() || plan.spp.contains(s)).collect();
         let Some(&picture_spp) = spps.iter().min() else {
-            bail!("view {name} has no noisy render at the requested spp {:?}", args.spp);
+            bail!("view {name} has no noisy render at the requested spp {:?}", plan.spp);
         };
         let mut reference_row = true;
         for spp in spps {
-            let images = load_view(&args.dataset, view, spp)?;
+            let images = load_view(&plan.dataset, view, spp)?;
             let exposure = exposure_of(&images.reference)?;
             let preview = |method: &str, image: &Image| -> Result<String> {
                 let file = format!("{name}_{spp:06}_{}.png", file_safe(method));
@@ -131,7 +130,7 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
                     continue;
                 }
                 let run = method
-                    .run(&images, args.timing_runs)
+                    .run(&images, plan.timing_runs)
                     .with_context(|| format!("{} on {name} at {spp} spp", method.name()))?;
                 let (image, denoise_seconds) = match run {
                     Run::Done(image, seconds) => (image, seconds),
@@ -155,7 +154,7 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
             }
         }
     }
-    report.write(&args.out)?;
+    report.write(&plan.out)?;
     Ok(report)
 }
 
