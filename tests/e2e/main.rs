@@ -241,10 +241,12 @@ fn check_eval_report(report: &Path) {
     assert_eq!(summary["schema"], 3);
     let rows = summary["rows"].as_array().unwrap();
     let methods: Vec<&str> = rows.iter().map(|r| r["method"].as_str().unwrap()).collect();
-    assert_eq!(methods, ["reference", "noisy", "run/model", "guided", "noisy", "run/model", "guided"]);
+    // Official OIDN comes by default, for the model's features.
+    let oidn = "oidn-2.5.1 rt_hdr_alb_nrm";
+    assert_eq!(methods, ["reference", "noisy", "run/model", oidn, "guided", "noisy", "run/model", oidn, "guided"]);
     for r in rows {
         assert!(r["render_seconds"].as_f64().is_some_and(|t| t > 0.0), "{r}");
-        let denoiser = r["method"] == "run/model" || r["method"] == "guided";
+        let denoiser = r["method"] == "run/model" || r["method"] == "guided" || r["method"] == oidn;
         assert_eq!(r["denoise_seconds"].is_null(), !denoiser, "{r}");
         assert!(r["ms_ssim"].is_null(), "32 px is too small for MS-SSIM: {r}");
         assert!(r["flip"].as_f64().is_some_and(|f| (0.0..=1.0).contains(&f)), "{r}");
@@ -256,13 +258,13 @@ fn check_eval_report(report: &Path) {
     let marked: Vec<&serde_json::Value> = figures[1]["images"].as_array().unwrap().iter().collect();
     assert!(marked.iter().all(|i| i["method"].is_string() && i["marks"]["over_low"].is_number()), "{marked:?}");
     let tradeoff = summary["tradeoff"].as_array().unwrap();
-    assert_eq!(tradeoff.len(), 8, "model and filter at 1 and 2 spp, for relMSE and 1 - SSIM: {tradeoff:?}");
+    assert_eq!(tradeoff.len(), 12, "model, OIDN and filter at 1 and 2 spp, for relMSE and 1 - SSIM: {tradeoff:?}");
     assert!(tradeoff.iter().all(|c| c["method"] != "noisy" && c["seconds"].as_f64().is_some()));
 
     let csv = std::fs::read_to_string(report.join("error_vs_time.csv")).unwrap();
     let lines: Vec<&str> = csv.lines().collect();
     assert_eq!(lines[0], "view,method,spp,render_seconds,denoise_seconds,seconds,rel_mse,one_minus_ssim");
-    assert_eq!(lines.len(), 7, "noisy, the model and the filter at 1 and 2 spp:\n{csv}");
+    assert_eq!(lines.len(), 9, "noisy, the model, OIDN and the filter at 1 and 2 spp:\n{csv}");
     for plot in ["error_vs_time_rel_mse.png", "error_vs_time_one_minus_ssim.png"] {
         let png = image::open(report.join(plot)).unwrap().to_rgb8();
         assert!(png.pixels().any(|p| p.0 == [0, 0, 0]), "{plot} draws the noisy curve in black");
@@ -275,11 +277,15 @@ fn check_eval_report(report: &Path) {
 
     let md = std::fs::read_to_string(report.join("report.md")).unwrap();
     assert!(md.contains("## cbox_v001 at 1 spp (as the thesis's Tables 8.1–8.3)"), "{md}");
+    assert!(
+        md.contains("auxiliary inputs: each noisy render's own auxiliary images, at its spp (`--aux noisy`)"),
+        "{md}"
+    );
     assert!(md.contains("](error_vs_time_rel_mse.png)") && md.contains("run/model at 1 spp"), "{md}");
     let html = std::fs::read_to_string(report.join("report.html")).unwrap();
     assert!(html.starts_with("<!DOCTYPE html>") && html.trim_end().ends_with("</html>"));
     let images = html.matches("<img ").count();
-    assert_eq!(images, 2 + 4 + 3, "two plots, four crops, three difference pictures");
+    assert_eq!(images, 2 + 5 + 4, "two plots, five crops, four difference pictures");
     assert_eq!(html.matches("src=\"data:image/png;base64,").count(), images, "every image is inline");
 }
 
@@ -727,4 +733,129 @@ fn train_reads_a_toml_config_and_writes_metrics() {
     std::fs::write(&toml, "learning-rate = 1\n").unwrap();
     let err = expect_error(&["train", "--config", s(&toml), "--out", s(&dir.join("other"))]);
     assert!(err.contains("unknown field") && err.contains("learning-rate"), "{err}");
+}
+
+/// `hush train --init` with OIDN's official weights: the network, width, features and transfer come from
+/// the file, `config.json` records it with its hash, and after one step at a negligible learning rate the
+/// model denoises as OIDN's weights do (≥ 60 dB apart; Adam moves each weight by about the learning rate,
+/// 1e-9). More features start from them (`M_dsnn`); another width, or a changed file on resume, is refused.
+#[test]
+fn train_starts_from_oidn_weights() {
+    let dir = scratch("init");
+    let ds = small_dataset(&dir);
+    let oidn = repo().join("data/weights/oidn-2.5.1/rt_hdr_alb_nrm.tza");
+    let run = dir.join("run");
+    let common = ["--steps", "1", "--batch", "1", "--crop", "32", "--lr", "1e-9", "--spp", "4"];
+    let stderr =
+        expect_success(&[&["train", "--dataset", s(&ds), "--out", s(&run), "--init", s(&oidn)][..], &common].concat());
+    assert!(stderr.contains("starting from") && stderr.contains("rt_hdr_alb_nrm.tza"), "{stderr}");
+    let cfg: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("config.json")).unwrap()).unwrap();
+    let t = &cfg["train"];
+    assert_eq!((t["net"]["kind"].as_str(), t["net"]["width"].as_f64()), (Some("unet"), Some(1.0)));
+    assert_eq!(t["init"]["fnv1a"].as_str().map(str::len), Some(16), "{t}");
+
+    let color = ds.join("cbox_v000_000004.hdr.exr");
+    let (albedo, normal) = (ds.join("cbox_v000_ref.alb.exr"), ds.join("cbox_v000_ref.nrm.exr"));
+    let denoise = |model: &Path, out: &str| {
+        let out = dir.join(out);
+        let (c, a, n) = (s(&color), s(&albedo), s(&normal));
+        expect_success(&["denoise", "--model", s(model), "--color", c, "--albedo", a, "--normal", n, "--out", s(&out)]);
+        hush_dataset::read_rgb(&out).unwrap()
+    };
+    let (ours, theirs) = (denoise(&run.join("model.safetensors"), "ours.exr"), denoise(&oidn, "oidn.exr"));
+    let psnr = hush_eval::psnr(&ours, &theirs).unwrap();
+    assert!(psnr >= 60.0, "the fine-tuned model drifted from OIDN's weights after one tiny step: {psnr:.1} dB");
+    // `hush export` writes it in OIDN's format (f16 weights), which denoises as the f32 model does.
+    let tza = dir.join("model.tza");
+    expect_success(&["export", "--model", s(&run.join("model.safetensors")), "--out", s(&tza)]);
+    let exported = denoise(&tza, "exported.exr");
+    let psnr = hush_eval::psnr(&exported, &ours).unwrap();
+    assert!(psnr >= 45.0, "the exported TZA denoises {psnr:.1} dB away from the model");
+
+    let dsnn = dir.join("dsnn");
+    expect_success(
+        &[&["train", "--dataset", s(&ds), "--out", s(&dsnn), "--init", s(&oidn), "--features", "M_dsnn"][..], &common]
+            .concat(),
+    );
+    let err = expect_error(&[
+        "train",
+        "--dataset",
+        s(&ds),
+        "--out",
+        s(&dir.join("w")),
+        "--init",
+        s(&oidn),
+        "--width",
+        "0.25",
+    ]);
+    assert!(err.contains("holds a unet (width 1") && err.contains("drop --arch and --width"), "{err}");
+    let err = expect_error(&[
+        "train",
+        "--dataset",
+        s(&ds),
+        "--out",
+        s(&dir.join("c")),
+        "--init",
+        s(&oidn),
+        "--features",
+        "color",
+    ]);
+    assert!(err.contains("drops albedo"), "{err}");
+
+    // A run started from weights that then change is not continued from the other ones.
+    let copy = dir.join("copy.tza");
+    std::fs::copy(&oidn, &copy).unwrap();
+    let again = dir.join("again");
+    let args = [&["train", "--dataset", s(&ds), "--out", s(&again), "--init", s(&copy)][..], &common].concat();
+    expect_success(&args);
+    let mut bytes = std::fs::read(&copy).unwrap();
+    bytes[200] ^= 1; // a bit of the first convolution's weights (the table is at the end)
+    std::fs::write(&copy, bytes).unwrap();
+    let err = expect_error(&args);
+    assert!(err.contains("cannot continue") && err.contains("init: ") && err.contains("copy.tza (FNV-1a"), "{err}");
+}
+
+/// Each noisy render's own features are stored beside it and are what training and evaluation use by default;
+/// a dataset from before they were stored is refused with the fix, and `hush dataset` with the same arguments
+/// then adds them by re-rendering the noisy images only (same seeds: the same color), keeping the reference.
+#[test]
+fn noisy_renders_keep_their_own_features() {
+    let dir = scratch("own-aux");
+    let ds = dir.join("ds");
+    let args = cbox_dataset_args(&ds, "2", "2");
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    expect_success(&args);
+    let own = hush_dataset::read_rgb(ds.join("cbox_v000_000002.alb.exr")).unwrap();
+    let clean = hush_dataset::read_rgb(ds.join("cbox_v000_ref.alb.exr")).unwrap();
+    assert_ne!(own, clean, "2 spp of albedo is not the clean 4-spp one");
+    for kind in ["nrm", "diff", "spec"] {
+        assert!(ds.join(format!("cbox_v000_000002.{kind}.exr")).is_file(), "{kind}");
+    }
+
+    // The manifest of an older dataset: no `aux` in the noisy records.
+    let manifest_path = ds.join("manifest.json");
+    let mut manifest = manifest_of(&ds);
+    for view in manifest["views"].as_array_mut().unwrap() {
+        for r in view["noisy"].as_array_mut().unwrap() {
+            r.as_object_mut().unwrap().remove("aux");
+        }
+    }
+    std::fs::write(&manifest_path, serde_json::to_string_pretty(&manifest).unwrap()).unwrap();
+    let (run, clean_run) = (dir.join("run"), dir.join("clean"));
+    let train = ["train", "--dataset", s(&ds), "--steps", "1", "--crop", "32", "--width", "0.0625"];
+    let err = expect_error(&[&train[..], &["--out", s(&run)]].concat());
+    assert!(err.contains("run `hush dataset` again") && err.contains("--aux clean"), "{err}");
+    expect_success(&[&train[..], &["--aux", "clean", "--out", s(&clean_run)]].concat());
+
+    let reference = ds.join("cbox_v000_ref.hdr.exr");
+    let color = std::fs::read(ds.join("cbox_v000_000002.hdr.exr")).unwrap();
+    let ref_time = reference.metadata().unwrap().modified().unwrap();
+    let stderr = expect_success(&args);
+    assert!(stderr.contains("2 images rendered"), "the two noisy renders only: {stderr}");
+    assert_eq!(std::fs::read(ds.join("cbox_v000_000002.hdr.exr")).unwrap(), color, "same seed, same image");
+    assert_eq!(reference.metadata().unwrap().modified().unwrap(), ref_time, "the reference is kept");
+    expect_success(&[&train[..], &["--out", s(&run)]].concat());
+    let err = expect_error(&["train", "--resume", s(&clean_run), "--aux", "noisy"]);
+    assert!(err.contains("aux: clean in the run, noisy now"), "{err}");
 }

@@ -13,6 +13,7 @@ mod procedural;
 mod sweep;
 mod test;
 mod train_check;
+mod train_default;
 mod util;
 
 use std::process::ExitCode;
@@ -30,6 +31,10 @@ tasks:
                              train a narrow U-Net on a small dataset of the Cornell box and Veach's MIS
                              scene; fail unless it beats the noisy input by >= 5 dB PSNR on each scene's
                              held-out views at 4 spp (target/train-check/summary.json)
+  train-default [--release] [--steps N] [--only hush_alb_nrm|hush_color]
+                             retrain the shipped models (resumable): render the dataset of the bundled and
+                             procedural scenes, fine-tune OIDN's weights, evaluate against OIDN on the held-out
+                             scenes, write data/models/<name>.safetensors, .tza and the model card .md
   bench render [--release] [--spp N]
                              M paths per CPU-second and relMSE × CPU-seconds on the Cornell box
                              (512², max_depth 8), hush against Mitsuba 3 when it is installed
@@ -64,6 +69,7 @@ fn main() -> ExitCode {
         Some("baselines") => baselines::run(&args[1..]),
         Some("sweep") => sweep::run(&args[1..]),
         Some("train-check") => train_check::run(&args[1..]),
+        Some("train-default") => train_default::run(&args[1..]),
         Some("cuda-check") => cuda_check::run(&args[1..]),
         _ => Err(format!("{USAGE}{}", sweep::USAGE)),
     };

@@ -26,8 +26,9 @@ impl CheckReport {
 ///   the scene paths, which differ between machines);
 /// * completeness: every scene of the settings has every view, no view is left pending, every view has
 ///   the noisy render of every spp of the ladder, the reference and the four features;
-/// * every file listed (and the `.alb`/`.nrm` files beside each noisy render) exists, reads as an RGB EXR of
-///   the camera's size and holds no NaN/Inf; the per-spp feature files equal the `_ref` ones;
+/// * every file listed (with each noisy render's own features, or in older datasets the `.alb`/`.nrm` files
+///   beside it) exists, reads as an RGB EXR of the camera's size and holds no NaN/Inf; in older datasets the
+///   per-spp feature files equal the `_ref` ones;
 /// * no temporary file (`.*.tmp`) of an interrupted write is left.
 ///
 /// Only an unreadable manifest is an `Err`; everything else is a problem in the report.
@@ -123,7 +124,8 @@ fn check_view_files(layout: &Layout, view: &ViewRecord, checked: &mut usize, pro
             problems.push(e);
         }
     }
-    for r in &view.noisy {
+    // Datasets from before the renders' own features were stored link the clean ones beside each render.
+    for r in view.noisy.iter().filter(|r| r.aux.is_none()) {
         for kind in AuxKind::OIDN {
             let beside = layout.path(&Layout::noisy_aux_name(&view.scene, &view.view, r.spp, kind));
             let source = layout.path(view.aux.file(kind));

@@ -4,8 +4,10 @@
 //! <root>/manifest.json                    the manifest (see [`crate::Manifest`])
 //! <root>/manifest.shard-2-of-8.json       one shard's part of it (`hush dataset --shard 2/8`)
 //! <root>/<scene>_<view>_000004.hdr.exr     noisy renders, one per spp (R,G,B)
-//! <root>/<scene>_<view>_000004.alb.exr     the same file as `_ref.alb.exr` (a hard link, or a copy where the
-//! <root>/<scene>_<view>_000004.nrm.exr       file system has none), so OIDN's loader finds features per spp
+//! <root>/<scene>_<view>_000004.alb.exr     the noisy render's own albedo, normal, diffuse and specular, at its
+//! <root>/<scene>_<view>_000004.nrm.exr       spp (OIDN's toolkit reads `.alb` and `.nrm` beside every noisy
+//! <root>/<scene>_<view>_000004.diff.exr      render). Datasets from before these were stored hold hard links
+//! <root>/<scene>_<view>_000004.spec.exr      to the clean `_ref` features under the first two names instead
 //! <root>/<scene>_<view>_ref.hdr.exr        the reference (R,G,B)
 //! <root>/<scene>_<view>_ref.alb.exr        clean albedo (R,G,B)
 //! <root>/<scene>_<view>_ref.nrm.exr        clean shading normal (R,G,B = x,y,z)
@@ -26,7 +28,46 @@ pub struct Layout {
     root: PathBuf,
 }
 
-/// The clean auxiliary features stored once per view.
+/// Which auxiliary images go with a noisy render: its own (`Noisy`, at its spp: what a user denoising a render
+/// has, OIDN's default) or the view's clean ones (`Clean`: rendered once per view at `--aux-spp`, first hit
+/// only; OIDN's `clean_aux`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AuxSource {
+    #[default]
+    Noisy,
+    Clean,
+}
+
+impl AuxSource {
+    pub fn name(self) -> &'static str {
+        match self {
+            AuxSource::Noisy => "noisy",
+            AuxSource::Clean => "clean",
+        }
+    }
+
+    /// `noisy` or `clean`.
+    pub fn parse(s: &str) -> Option<AuxSource> {
+        [AuxSource::Noisy, AuxSource::Clean].into_iter().find(|a| a.name() == s)
+    }
+
+    /// How a report says which were used.
+    pub fn describe(self) -> &'static str {
+        match self {
+            AuxSource::Noisy => "each noisy render's own auxiliary images, at its spp",
+            AuxSource::Clean => "the view's clean auxiliary images (first hit, --aux-spp samples)",
+        }
+    }
+}
+
+impl std::fmt::Display for AuxSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// The auxiliary features stored per view (clean) and per noisy render (its own).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum AuxKind {
     Albedo,
@@ -138,10 +179,11 @@ pub struct ViewImages {
     pub reference: Image,
 }
 
-/// Loads the noisy render at `spp`, the clean auxiliary images and the reference of `view` from `root`.
-/// Fails if the spp is not stored (listing those that are), if a file is missing, if the sizes differ from each
+/// Loads the noisy render at `spp`, the auxiliary images `aux` names and the reference of `view` from `root`.
+/// Fails if the spp is not stored (listing those that are), if the render's own auxiliary images are asked for
+/// but the dataset predates them (saying how to add them), if a file is missing, if the sizes differ from each
 /// other or from the camera (naming the files and sizes), or if any image holds NaN/Inf.
-pub fn load_view(root: impl AsRef<Path>, view: &ViewRecord, spp: u32) -> Result<ViewImages> {
+pub fn load_view(root: impl AsRef<Path>, view: &ViewRecord, spp: u32, aux: AuxSource) -> Result<ViewImages> {
     let layout = Layout::new(root.as_ref());
     let noisy = view.noisy_at(spp).ok_or_else(|| {
         Error::Dataset(format!(
@@ -151,14 +193,23 @@ pub fn load_view(root: impl AsRef<Path>, view: &ViewRecord, spp: u32) -> Result<
             view.noisy.iter().map(|r| r.spp).collect::<Vec<_>>()
         ))
     })?;
-    let files = [
-        noisy.file.as_str(),
-        view.aux.albedo.as_str(),
-        view.aux.normal.as_str(),
-        view.aux.diffuse.as_str(),
-        view.aux.specular.as_str(),
-        view.reference.file.as_str(),
-    ];
+    let features = match aux {
+        AuxSource::Clean => AuxKind::ALL.map(|k| view.aux.file(k)),
+        AuxSource::Noisy => match &noisy.aux {
+            Some(own) => AuxKind::ALL.map(|k| own.file(k)),
+            None => {
+                return Err(Error::Dataset(format!(
+                    "view {}_{} at {spp} spp in {}: the dataset stores no auxiliary images of the render itself \
+                     (it was made before hush stored them); run `hush dataset` again with the same arguments to \
+                     add them (it re-renders only the noisy images), or use the clean ones (--aux clean)",
+                    view.scene,
+                    view.view,
+                    layout.root().display()
+                )));
+            }
+        },
+    };
+    let files = [noisy.file.as_str(), features[0], features[1], features[2], features[3], view.reference.file.as_str()];
     let mut images = Vec::with_capacity(files.len());
     for file in files {
         let path = layout.path(file);

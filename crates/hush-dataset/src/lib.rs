@@ -44,11 +44,11 @@ pub use error::{Error, Result};
 pub use exr_io::{ExrImage, channel_names, read_exr, read_rgb, write_exr, write_rgb};
 pub use firefly::{DEFAULT_FIREFLY_FACTOR, DespeckleStats, despeckle, luminance};
 pub use image::Image;
-pub use layout::{AuxKind, Layout, ViewImages, load_view};
+pub use layout::{AuxKind, AuxSource, Layout, ViewImages, load_view};
 pub use manifest::{
-    AuxRecord, CameraRecord, DatasetConfig, FireflyRecord, Manifest, PendingView, ProbeRecord, ProceduralRecord,
-    ProceduralScene, ReferenceCheck, ReferenceRecord, RenderRecord, SceneEntry, SkippedScene, Split, ViewGeneration,
-    ViewRecord, manifest_files,
+    AuxFiles, AuxRecord, CameraRecord, DatasetConfig, FireflyRecord, Manifest, PendingView, ProbeRecord,
+    ProceduralRecord, ProceduralScene, ReferenceCheck, ReferenceRecord, RenderRecord, SceneEntry, SkippedScene, Split,
+    ViewGeneration, ViewRecord, manifest_files,
 };
 pub use png::{srgb_encode, write_png_preview};
 pub use validate::{NegativePolicy, check_finite, check_radiance};

@@ -41,21 +41,28 @@ pub struct RenderRecord {
     pub file: String,
     /// Seconds spent tracing this image (the one-time pipeline creation is not included).
     pub render_seconds: f64,
+    /// The render's own auxiliary images, accumulated over its samples (what a user denoising this render
+    /// has, and what OIDN's default weights expect). `None` in datasets from before they were stored.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub aux: Option<AuxFiles>,
 }
 
-/// The clean auxiliary images of a view, rendered together (first hit only: `max_depth` 1).
+/// The four auxiliary images of one render.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct AuxRecord {
-    pub spp: u32,
-    pub seed: u64,
-    pub render_seconds: f64,
+pub struct AuxFiles {
     pub albedo: String,
     pub normal: String,
     pub diffuse: String,
     pub specular: String,
 }
 
-impl AuxRecord {
+impl AuxFiles {
+    /// The files `name` gives each feature.
+    pub fn from_fn(name: impl Fn(crate::AuxKind) -> String) -> AuxFiles {
+        use crate::AuxKind::*;
+        AuxFiles { albedo: name(Albedo), normal: name(Normal), diffuse: name(Diffuse), specular: name(Specular) }
+    }
+
     /// The file of one feature.
     pub fn file(&self, kind: crate::AuxKind) -> &str {
         match kind {
@@ -64,6 +71,23 @@ impl AuxRecord {
             crate::AuxKind::Diffuse => &self.diffuse,
             crate::AuxKind::Specular => &self.specular,
         }
+    }
+}
+
+/// The clean auxiliary images of a view, rendered together (first hit only: `max_depth` 1).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AuxRecord {
+    pub spp: u32,
+    pub seed: u64,
+    pub render_seconds: f64,
+    #[serde(flatten)]
+    pub files: AuxFiles,
+}
+
+impl AuxRecord {
+    /// The file of one feature.
+    pub fn file(&self, kind: crate::AuxKind) -> &str {
+        self.files.file(kind)
     }
 }
 
@@ -465,8 +489,13 @@ impl Manifest {
         let mut files = Vec::new();
         for r in &view.noisy {
             files.push(r.file.clone());
-            for kind in crate::AuxKind::OIDN {
-                files.push(Layout::noisy_aux_name(&view.scene, &view.view, r.spp, kind));
+            match &r.aux {
+                Some(own) => files.extend(crate::AuxKind::ALL.iter().map(|&k| own.file(k).to_string())),
+                None => {
+                    for kind in crate::AuxKind::OIDN {
+                        files.push(Layout::noisy_aux_name(&view.scene, &view.view, r.spp, kind));
+                    }
+                }
             }
         }
         files.push(view.reference.file.clone());

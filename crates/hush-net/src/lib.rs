@@ -15,6 +15,8 @@
 //!   [`finish_color`]: the network's input and output, as OIDN prepares them ([`InputFeatures`] says which auxiliary images go in, in which order).
 //! * [`save_weights`] / [`load_weights`] / [`load_model`] / [`read_metadata`]: safetensors bytes carrying a
 //!   [`ModelInfo`] (network, features, transfer) as metadata. Reading and writing files is the caller's job.
+//! * [`Pretrained`]: trained weights (TZA or hush) to fine-tune from, matched by name and shape, their first
+//!   convolution adapted to a larger feature set.
 //! * [`load_tza`] / [`export_tza`] / [`parse_tza`] / [`write_tza`]: OIDN's Tensor Archive format, so hush runs
 //!   OIDN's official weights and OIDN runs hush's.
 //!
@@ -49,6 +51,7 @@ mod input;
 pub mod loss;
 mod net;
 mod patch_mlp;
+mod pretrained;
 mod resample;
 pub mod transfer;
 mod tza;
@@ -60,6 +63,7 @@ pub use input::{Feature, InputFeatures, build_inference_input, build_input, fini
 pub use loss::Loss;
 pub use net::{DenoiseNet, Net, NetConfig, PATCH_MLP_KIND};
 pub use patch_mlp::{Activation, BURGER_HIDDEN, BURGER_PATCH, BURGER_STRIDE, PatchMlp, PatchMlpConfig};
+pub use pretrained::Pretrained;
 pub use tza::{TzaTensor, export_tza, infer_config, load_tza, oidn_features, parse_tza, write_tza};
 pub use unet::{
     ALIGNMENT, ConvShape, THESIS_M1_WIDTH, THESIS_M2_WIDTH, UNet, UNetConfig, UNetKind, crop, hwc_to_nchw,

@@ -36,7 +36,8 @@
 //! assert!(trained.folder.model().is_file());
 //!
 //! let report = eval::evaluate(&EvalPlan::new(&plan.out, vec![trained.folder.model()], dir.join("eval")), &Quiet)?;
-//! assert_eq!(report.methods(), ["reference", "noisy", "run/model"]);
+//! // Official OIDN comes beside every model.
+//! assert_eq!(report.methods(), ["reference", "noisy", "run/model", "oidn-2.5.1 rt_hdr_alb_nrm"]);
 //! assert!(dir.join("eval/report.md").is_file());
 //! # std::fs::remove_dir_all(&dir)?;
 //! # Ok(())
@@ -47,6 +48,7 @@ pub mod dataset;
 mod device;
 pub mod eval;
 mod observer;
+pub mod official;
 mod probe;
 pub mod procedural;
 pub mod process;

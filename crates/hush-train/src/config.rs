@@ -37,6 +37,29 @@ pub struct TrainConfig {
     pub eval_every: usize,
     /// Scale the gradients down so that their global L2 norm is at most this.
     pub clip_grad_norm: Option<f64>,
+    /// The trained weights the run starts from (fine-tuning); `None`: from [`hush_net::init_weights`]'s
+    /// random weights of `seed`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub init: Option<InitRecord>,
+}
+
+/// Which trained weights a run started from, as `config.json` records it: enough to tell whether a resumed
+/// or repeated run starts from the same ones.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct InitRecord {
+    /// The file, as the user named it.
+    pub source: String,
+    /// FNV-1a (64-bit) of the file's bytes, in hex.
+    pub fnv1a: String,
+    /// The input features the weights were trained with, before [`hush_net::Pretrained::adapt`].
+    pub features: InputFeatures,
+}
+
+impl InitRecord {
+    /// The record of weights read from `source` (its `bytes`) that take `features`.
+    pub fn of(source: impl Into<String>, bytes: &[u8], features: InputFeatures) -> Self {
+        InitRecord { source: source.into(), fnv1a: format!("{:016x}", hush_hash::fnv1a(bytes)), features }
+    }
 }
 
 impl TrainConfig {
@@ -60,6 +83,7 @@ impl TrainConfig {
             seed: 0,
             eval_every: 10,
             clip_grad_norm: None,
+            init: None,
         }
     }
 

@@ -9,7 +9,8 @@
 //!   and OIDN's one-cycle).
 //! * [`TrainSample`]: an input/target pair already in the network's space;
 //!   [`TrainSample::from_linear`] prepares one from linear images as OIDN's toolkit does.
-//! * [`train`]: runs the loop, reports every step to an observer, returns [`Trained`];
+//! * [`train`]: runs the loop from random weights, trained ones ([`Start::Init`], fine-tuning) or a
+//!   checkpoint, reports every step to an observer, returns [`Trained`];
 //!   [`read_train_state`] reads where a checkpoint stands.
 //! * [`encode_samples`] / [`decode_samples`]: prepared samples as f16 bytes under a key with a checksum, for
 //!   an on-disk cache that a change of data or settings invalidates.
@@ -19,7 +20,7 @@
 //! use std::ops::ControlFlow;
 //! use hush_dataset::Image;
 //! use hush_net::{InputFeatures, UNetConfig, UNetKind};
-//! use hush_train::{TrainConfig, TrainSample, train};
+//! use hush_train::{Start, TrainConfig, TrainSample, train};
 //!
 //! // A 32×32 grey target and a noisy input, color only.
 //! let target = Image::from_fn(32, 32, 3, |_, _, _| 0.5);
@@ -29,7 +30,7 @@
 //! let mut cfg = TrainConfig::thesis(InputFeatures::default());
 //! cfg.net = UNetConfig { kind: UNetKind::Unet, in_channels: 3, out_channels: 3, width: 0.25 }.into();
 //! (cfg.steps, cfg.batch, cfg.crop) = (2, 1, 16);
-//! let trained = train(&cfg, &samples, &[], &candle_core::Device::Cpu, None, |report| {
+//! let trained = train(&cfg, &samples, &[], &candle_core::Device::Cpu, Start::Fresh, |report| {
 //!     println!("step {} loss {:.4}", report.row.step, report.row.loss);
 //!     ControlFlow::Continue(())
 //! })?;
@@ -52,11 +53,11 @@ mod train;
 
 pub use cache::{decode_samples, encode_samples, round_trip};
 pub use checkpoint::{STATE_KEY, TrainState, read_train_state};
-pub use config::TrainConfig;
+pub use config::{InitRecord, TrainConfig};
 pub use error::{Result, TrainError};
 pub use log::{LOSS_COLUMNS, METRICS_COLUMNS, loss_csv, metrics_csv, parse_loss_csv, parse_metrics_csv};
 pub use optim::{Optimizer, OptimizerConfig};
 pub use plot::plot_losses;
 pub use sample::{Augment, Crop, PREPARATION_VERSION, TrainSample};
 pub use schedule::Schedule;
-pub use train::{EpochRow, LossRow, StepReport, Trained, train};
+pub use train::{EpochRow, LossRow, Start, StepReport, Trained, train};

@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use candle_core::{DType, Device, Module, Tensor};
 use candle_nn::{VarBuilder, VarMap};
-use hush_net::{ALIGNMENT, Net, hwc_to_nchw, init_weights, save_weights};
+use hush_net::{ALIGNMENT, Net, Pretrained, hwc_to_nchw, init_weights, save_weights};
 use serde::{Deserialize, Serialize};
 
 use crate::checkpoint::{TrainState, load_checkpoint, save_checkpoint};
@@ -83,6 +83,18 @@ impl std::fmt::Debug for Trained {
     }
 }
 
+/// Where a run's weights come from.
+#[derive(Clone, Copy, Debug)]
+pub enum Start<'a> {
+    /// Random weights from the configuration's seed ([`init_weights`]).
+    Fresh,
+    /// Trained weights (fine-tuning), adapted to the configuration's features ([`Pretrained::adapt`]);
+    /// the configuration's `init` records which.
+    Init(&'a Pretrained),
+    /// A checkpoint of an earlier run of the same configuration (see [`read_train_state`](crate::read_train_state)).
+    Resume(&'a [u8]),
+}
+
 /// A batch prepared by the loader thread.
 struct Batch {
     crops: Vec<Crop>,
@@ -97,8 +109,9 @@ struct Batch {
 /// weights with the configured optimizer at the schedule's learning rate for the step's epoch. Batches
 /// are prepared on a background thread one step ahead. After each step `observer` gets a [`StepReport`]
 /// (with a checkpoint at the end of each epoch); returning `ControlFlow::Break(())` stops training after
-/// that step. `resume` is a checkpoint of an earlier run of the same configuration: training continues
-/// after its step exactly as the uninterrupted run would have.
+/// that step. `start` says where the weights come from; from a checkpoint ([`Start::Resume`]) training
+/// continues after its step exactly as the uninterrupted run would have. A run whose configuration records
+/// initial weights (`cfg.init`) must start from them or resume.
 ///
 /// Samples are checked first: a NaN or infinite value is a [`TrainError::Data`] naming the sample and
 /// pixel. A non-finite loss or gradient during training is a [`TrainError::Diverged`] naming the step and
@@ -108,7 +121,7 @@ pub fn train(
     train: &[TrainSample],
     test: &[TrainSample],
     device: &Device,
-    resume: Option<&[u8]>,
+    start: Start<'_>,
     mut observer: impl FnMut(StepReport) -> ControlFlow<()>,
 ) -> Result<Trained> {
     cfg.validate()?;
@@ -122,12 +135,37 @@ pub fn train(
     let net = Net::new(VarBuilder::from_varmap(&varmap, DType::F32, device), &cfg.net)?;
     let mut opt = Optimizer::for_varmap(cfg.optimizer.clone(), &varmap)?;
     let mut best = None;
-    let first_step = match resume {
-        None => {
+    let first_step = match start {
+        Start::Fresh if cfg.init.is_some() => {
+            return Err(TrainError::Config(format!(
+                "the configuration starts from {}, but no initial weights were given",
+                cfg.init.as_ref().map_or("", |i| i.source.as_str())
+            )));
+        }
+        Start::Fresh => {
             init_weights(&varmap, cfg.seed)?;
             1
         }
-        Some(bytes) => {
+        Start::Init(weights) => {
+            if cfg.init.is_none() {
+                return Err(TrainError::Config(
+                    "initial weights were given, but the configuration does not record them (set `init`)".into(),
+                ));
+            }
+            let adapted = weights.adapt(&cfg.features).map_err(|e| TrainError::Config(e.to_string()))?;
+            if adapted.info.net != cfg.net || adapted.info.transfer != cfg.transfer {
+                return Err(TrainError::Config(format!(
+                    "the initial weights are a {} with the {:?} transfer, the configuration asks for a {} with {:?}",
+                    adapted.info.net.describe(),
+                    adapted.info.transfer,
+                    cfg.net.describe(),
+                    cfg.transfer
+                )));
+            }
+            adapted.load_into(&varmap).map_err(|e| TrainError::Config(e.to_string()))?;
+            1
+        }
+        Start::Resume(bytes) => {
             let state = load_checkpoint(bytes, cfg, &varmap, &mut opt, device)?;
             let changed: Vec<String> = state
                 .config

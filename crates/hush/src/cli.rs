@@ -2,6 +2,7 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
 
+use hush_dataset::AuxSource;
 use hush_pipeline::{EvalPlan, TrainOptions, ViewOverrides};
 use hush_scene::procedural::{GeneratorOptions, Ingredients};
 
@@ -35,6 +36,8 @@ pub enum Command {
     Train(TrainOptions),
     /// Denoise one image with a trained model.
     Denoise(DenoiseArgs),
+    /// Write a trained U-Net as OIDN's Tensor Archive (.tza), which OIDN's own runtime runs.
+    Export(crate::export_cmd::ExportArgs),
     /// Evaluate models and baselines against the noisy input on a dataset's test split: metrics, error
     /// against run time, pictures and a report.
     Eval(EvalArgs),
@@ -180,6 +183,14 @@ pub struct EvalArgs {
     /// Denoise timing: median of this many warm runs.
     #[arg(long, default_value_t = EvalPlan::DEFAULT_TIMING_RUNS)]
     pub timing_runs: usize,
+    /// Auxiliary inputs of the denoisers: `noisy` (each noisy render's own, at its spp) or `clean` (the
+    /// view's, rendered once at the dataset's --aux-spp).
+    #[arg(long, default_value = "noisy", value_parser = parse_aux)]
+    pub aux: AuxSource,
+    /// Leave out OIDN's official weights (built in, run by hush), which are evaluated by default for each
+    /// feature set among the models.
+    #[arg(long)]
+    pub no_official: bool,
 }
 
 impl EvalArgs {
@@ -191,8 +202,14 @@ impl EvalArgs {
             spp: self.spp,
             out: self.out,
             timing_runs: self.timing_runs,
+            aux: self.aux,
+            official: !self.no_official,
         }
     }
+}
+
+fn parse_aux(s: &str) -> Result<AuxSource, String> {
+    AuxSource::parse(s).ok_or_else(|| format!("'{s}': use noisy or clean"))
 }
 
 fn parse_vec3(s: &str) -> Result<[f32; 3], String> {

@@ -6,6 +6,7 @@ mod cli;
 mod dataset_cmd;
 mod denoise_cmd;
 mod eval_cmd;
+mod export_cmd;
 mod progress;
 mod render_cmd;
 mod report_cmd;
@@ -46,6 +47,7 @@ fn main() {
         cli::Command::Scene(args) => scene_cmd::run(args),
         cli::Command::Train(args) => train_cmd::run(args),
         cli::Command::Denoise(args) => denoise_cmd::run(args),
+        cli::Command::Export(args) => export_cmd::run(args),
         cli::Command::Eval(args) => eval_cmd::run(args),
         cli::Command::Bench(args) => bench_cmd::run(args),
         cli::Command::SweepReport(args) => report_cmd::run(args),

@@ -1,13 +1,19 @@
 use hush_dataset::{
-    AuxKind, AuxRecord, CameraRecord, DatasetConfig, FireflyRecord, Layout, Manifest, PendingView, ReferenceRecord,
-    RenderRecord, SceneEntry, Split, ViewGeneration, ViewRecord, check_dataset, link_or_copy, load_view, temp_target,
-    write_rgb,
+    AuxFiles, AuxKind, AuxRecord, AuxSource, CameraRecord, DatasetConfig, FireflyRecord, Layout, Manifest, PendingView,
+    ReferenceRecord, RenderRecord, SceneEntry, Split, ViewGeneration, ViewRecord, check_dataset, link_or_copy,
+    load_view, temp_target, write_rgb,
 };
 
 use crate::{TempDir, ramp};
 
 pub fn record(scene: &str, view: &str, spps: &[u32], size: u32) -> ViewRecord {
-    let render = |spp: u32, file: String| RenderRecord { spp, seed: 7 + u64::from(spp), file, render_seconds: 0.5 };
+    let render = |spp: u32, file: String| RenderRecord {
+        spp,
+        seed: 7 + u64::from(spp),
+        file,
+        render_seconds: 0.5,
+        aux: Some(AuxFiles::from_fn(|kind| Layout::noisy_aux_name(scene, view, spp, kind))),
+    };
     ViewRecord {
         scene: scene.into(),
         view: view.into(),
@@ -35,15 +41,14 @@ pub fn record(scene: &str, view: &str, spps: &[u32], size: u32) -> ViewRecord {
             spp: 64,
             seed: 1,
             render_seconds: 0.25,
-            albedo: Layout::aux_name(scene, view, AuxKind::Albedo),
-            normal: Layout::aux_name(scene, view, AuxKind::Normal),
-            diffuse: Layout::aux_name(scene, view, AuxKind::Diffuse),
-            specular: Layout::aux_name(scene, view, AuxKind::Specular),
+            files: AuxFiles::from_fn(|kind| Layout::aux_name(scene, view, kind)),
         },
     }
 }
 
-/// Writes every file of `view` as a small ramp image, and the OIDN feature files beside each noisy render.
+/// Writes every file of `view` as a small ramp image: the noisy renders, the reference, the clean features and
+/// each render's own (at offsets 1, 2, 3–6 and 10 + 4 × render + feature); a render recorded without its own
+/// features (an older dataset) gets OIDN's feature files beside it as links to the clean ones.
 fn write_files(root: &std::path::Path, view: &ViewRecord) {
     let n = view.camera.width as usize;
     let files = view.noisy.iter().map(|r| &r.file).chain([&view.reference.file]);
@@ -51,10 +56,19 @@ fn write_files(root: &std::path::Path, view: &ViewRecord) {
     for (i, file) in files.chain(aux.iter()).enumerate() {
         write_rgb(root.join(file), &ramp(n, n, 3, i as f32)).unwrap();
     }
-    for r in &view.noisy {
-        for kind in AuxKind::OIDN {
-            let beside = root.join(Layout::noisy_aux_name(&view.scene, &view.view, r.spp, kind));
-            link_or_copy(&root.join(view.aux.file(kind)), &beside).unwrap();
+    for (i, r) in view.noisy.iter().enumerate() {
+        match &r.aux {
+            Some(own) => {
+                for (j, kind) in AuxKind::ALL.into_iter().enumerate() {
+                    write_rgb(root.join(own.file(kind)), &ramp(n, n, 3, (10 + 4 * i + j) as f32)).unwrap();
+                }
+            }
+            None => {
+                for kind in AuxKind::OIDN {
+                    let beside = root.join(Layout::noisy_aux_name(&view.scene, &view.view, r.spp, kind));
+                    link_or_copy(&root.join(view.aux.file(kind)), &beside).unwrap();
+                }
+            }
         }
     }
 }
@@ -108,14 +122,29 @@ fn load_view_reads_all_images() {
     let dir = TempDir::new("load-view");
     let view = record("cbox", "v0", &[4, 16], 8);
     write_files(dir.path(), &view);
-    let images = load_view(dir.path(), &view, 16).unwrap();
+    let images = load_view(dir.path(), &view, 16, AuxSource::Clean).unwrap();
     assert_eq!(images.color, ramp(8, 8, 3, 1.0));
     assert_eq!(images.reference, ramp(8, 8, 3, 2.0));
     assert_eq!(images.albedo, ramp(8, 8, 3, 3.0));
     assert_eq!(images.specular, ramp(8, 8, 3, 6.0));
+    // The 16-spp render's own features (the second render: 10 + 4 + feature).
+    let own = load_view(dir.path(), &view, 16, AuxSource::Noisy).unwrap();
+    assert_eq!((own.color, own.reference), (images.color, images.reference));
+    assert_eq!(own.albedo, ramp(8, 8, 3, 14.0));
+    assert_eq!(own.specular, ramp(8, 8, 3, 17.0));
 
-    let err = load_view(dir.path(), &view, 32).unwrap_err().to_string();
+    let err = load_view(dir.path(), &view, 32, AuxSource::Noisy).unwrap_err().to_string();
     assert!(err.contains("32 spp") && err.contains("[4, 16]"), "{err}");
+
+    // A dataset from before the renders' own features were stored: clean ones only, and a clear error.
+    let mut old = view.clone();
+    old.noisy.iter_mut().for_each(|r| r.aux = None);
+    assert!(load_view(dir.path(), &old, 4, AuxSource::Clean).is_ok());
+    let err = load_view(dir.path(), &old, 4, AuxSource::Noisy).unwrap_err().to_string();
+    assert!(
+        err.contains("cbox_v0 at 4 spp") && err.contains("run `hush dataset` again") && err.contains("--aux clean"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -123,19 +152,19 @@ fn load_view_rejects_mismatched_sizes_and_nan() {
     let dir = TempDir::new("load-view-bad");
     let view = record("cbox", "v0", &[4], 8);
     write_files(dir.path(), &view);
-    write_rgb(dir.join(&view.aux.normal), &ramp(8, 6, 3, 0.0)).unwrap();
-    let err = load_view(dir.path(), &view, 4).unwrap_err().to_string();
+    write_rgb(dir.join(&view.aux.files.normal), &ramp(8, 6, 3, 0.0)).unwrap();
+    let err = load_view(dir.path(), &view, 4, AuxSource::Clean).unwrap_err().to_string();
     assert!(err.contains("cbox_v0_ref.nrm.exr: 8x6") && err.contains("camera is 8x8"), "{err}");
 
-    write_rgb(dir.join(&view.aux.normal), &ramp(8, 8, 3, 0.0)).unwrap();
+    write_rgb(dir.join(&view.aux.files.normal), &ramp(8, 8, 3, 0.0)).unwrap();
     let mut bad = ramp(8, 8, 3, 0.0);
     bad.pixel_mut(5, 2)[1] = f32::NAN;
     write_rgb(dir.join(&view.reference.file), &bad).unwrap();
-    let err = load_view(dir.path(), &view, 4).unwrap_err().to_string();
+    let err = load_view(dir.path(), &view, 4, AuxSource::Clean).unwrap_err().to_string();
     assert!(err.contains("cbox_v0_ref.hdr.exr") && err.contains("(x 5, y 2), channel 1"), "{err}");
 
-    std::fs::remove_file(dir.join(&view.aux.diffuse)).unwrap();
-    let err = load_view(dir.path(), &view, 4).unwrap_err().to_string();
+    std::fs::remove_file(dir.join(&view.aux.files.diffuse)).unwrap();
+    let err = load_view(dir.path(), &view, 4, AuxSource::Clean).unwrap_err().to_string();
     assert!(err.contains("cbox_v0_ref.diff.exr"), "{err}");
 }
 
@@ -218,15 +247,24 @@ fn shard_parts_merge_on_load() {
 fn check_passes_a_complete_dataset_and_lists_every_problem() {
     let dir = TempDir::new("check");
     let mut m = Manifest { config: Some(config(&["cbox", "room"], 2, &[1, 2])), ..Default::default() };
+    // The room's views are from an older dataset: links to the clean features beside each render instead of
+    // the renders' own.
+    let legacy = |mut r: ViewRecord| {
+        r.noisy.iter_mut().for_each(|n| n.aux = None);
+        r
+    };
     for (scene, view) in [("cbox", "v000"), ("cbox", "v001"), ("room", "v000"), ("room", "v001")] {
         let r = record(scene, view, &[1, 2], 8);
+        let r = if scene == "room" { legacy(r) } else { r };
         write_files(dir.path(), &r);
         m.upsert(r).unwrap();
     }
     m.save(dir.path()).unwrap();
     let report = check_dataset(dir.path()).unwrap();
     assert!(report.ok(), "{:?}", report.problems);
-    assert_eq!((report.views, report.files_checked), (4, 4 * (2 * 3 + 5)));
+    // Per view 5 files of its own (reference, 4 clean features), per render the image and 4 own features, or
+    // in the older views 2 links.
+    assert_eq!((report.views, report.files_checked), (4, 2 * (2 * 5 + 5) + 2 * (2 * 3 + 5)));
 
     // Break it in every way check looks for.
     let mut nan = ramp(8, 8, 3, 0.0);
@@ -234,11 +272,12 @@ fn check_passes_a_complete_dataset_and_lists_every_problem() {
     write_rgb(dir.join("cbox_v000_000001.hdr.exr"), &nan).unwrap();
     write_rgb(dir.join("cbox_v001_ref.hdr.exr"), &ramp(8, 4, 3, 0.0)).unwrap();
     std::fs::remove_file(dir.join("room_v000_000002.nrm.exr")).unwrap();
+    std::fs::remove_file(dir.join("cbox_v000_000002.diff.exr")).unwrap();
     std::fs::write(dir.join("room_v000_ref.spec.exr"), b"not an exr").unwrap();
     write_rgb(dir.join("room_v000_000002.alb.exr"), &ramp(8, 8, 3, 9.0)).unwrap();
     std::fs::write(dir.join(".room_v001_000001.hdr.exr.123.0.tmp"), b"partial").unwrap();
     m.views.retain(|v| !(v.scene == "room" && v.view == "v001"));
-    let mut pending = PendingView::from(record("room", "v001", &[1], 8));
+    let mut pending = PendingView::from(legacy(record("room", "v001", &[1], 8)));
     pending.reference = None;
     m.upsert_progress(pending).unwrap();
     let mut short = record("cbox", "v001", &[1], 8);
@@ -252,6 +291,7 @@ fn check_passes_a_complete_dataset_and_lists_every_problem() {
         "cbox_v000_000001.hdr.exr: 1 non-finite",
         "cbox_v001_ref.hdr.exr: is 8x4x3 but the camera is 8x8x3",
         "room_v000_000002.nrm.exr: missing",
+        "cbox_v000_000002.diff.exr: missing",
         "room_v001: unfinished",
         "cbox_v001: noisy renders at {1} spp but the ladder is {1, 2}",
         ".room_v001_000001.hdr.exr.123.0.tmp: temporary file",
@@ -260,7 +300,7 @@ fn check_passes_a_complete_dataset_and_lists_every_problem() {
     ] {
         assert!(all.contains(needle), "no problem mentions {needle:?}:\n{all}");
     }
-    assert_eq!(report.problems.len(), 8, "{all}");
+    assert_eq!(report.problems.len(), 9, "{all}");
 }
 
 #[test]

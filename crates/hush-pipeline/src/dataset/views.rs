@@ -7,8 +7,8 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use glam::{Quat, Vec3};
 use hush_dataset::{
-    AuxKind, AuxRecord, CameraRecord, FireflyRecord, Layout, Manifest, PendingView, ProbeRecord, ReferenceCheck,
-    ReferenceRecord, RenderRecord, Split, ViewGeneration, check_image, despeckle, link_or_copy, read_rgb, write_rgb,
+    AuxFiles, AuxKind, AuxRecord, CameraRecord, FireflyRecord, Layout, Manifest, PendingView, ProbeRecord,
+    ReferenceCheck, ReferenceRecord, RenderRecord, Split, ViewGeneration, check_image, despeckle, read_rgb, write_rgb,
 };
 use hush_hash::SplitMix64;
 use hush_scene::{Camera, Scene};
@@ -159,6 +159,16 @@ fn generate_view(ctx: &Ctx, job: &JobScene, v: u32) -> Result<(Camera, ViewGener
     Ok((camera, ViewGeneration { kind: "generated".into(), seed, attempt, probe: Some(probe) }))
 }
 
+/// One auxiliary image of a render.
+fn aux_image(out: &RenderOutput, kind: AuxKind) -> &hush_dataset::Image {
+    match kind {
+        AuxKind::Albedo => &out.albedo,
+        AuxKind::Normal => &out.normal,
+        AuxKind::Diffuse => &out.diffuse,
+        AuxKind::Specular => &out.specular,
+    }
+}
+
 /// Renders (or keeps) every image of one view.
 pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u32, split: Split) -> Result<()> {
     let plan = ctx.plan;
@@ -199,13 +209,22 @@ pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u3
     for &spp in &spps {
         let seed = render_seed(plan.seed, name, v, &format!("noisy-{spp}"));
         let file = Layout::noisy_name(name, &view, spp);
+        let own = AuxFiles::from_fn(|kind| Layout::noisy_aux_name(name, &view, spp, kind));
         let kept = previous.as_ref().and_then(|p| p.noisy.iter().find(|r| r.spp == spp && r.seed == seed)).cloned();
-        match kept.filter(|r| r.file == file && ctx.valid(&file, &camera)) {
+        // A render is kept with its own features; one from before they were stored is rendered again.
+        let finished = |r: &RenderRecord| {
+            let files = std::iter::once(file.as_str()).chain(AuxKind::ALL.map(|k| own.file(k)));
+            r.file == file && r.aux.as_ref() == Some(&own) && files.into_iter().all(|f| ctx.valid(f, &camera))
+        };
+        match kept.filter(finished) {
             Some(r) => progress.noisy.push(r),
             None => {
                 let out = ctx.render(&scene, spp, seed, &format!("{label} {spp} spp"))?;
+                for kind in AuxKind::ALL {
+                    write_rgb(ctx.layout.path(own.file(kind)), aux_image(&out, kind))?;
+                }
                 write_rgb(ctx.layout.path(&file), &out.color)?;
-                progress.noisy.push(RenderRecord { spp, seed, file, render_seconds: out.seconds });
+                progress.noisy.push(RenderRecord { spp, seed, file, render_seconds: out.seconds, aux: Some(own) });
                 ctx.rendered += 1;
                 ctx.record(&progress)?;
             }
@@ -227,34 +246,18 @@ pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u3
             let mut first_hit = scene.clone();
             first_hit.max_depth = 1;
             let out = ctx.render(&first_hit, plan.aux_spp, aux_seed, &format!("{label} features"))?;
-            for (kind, file) in AuxKind::ALL.iter().zip(&aux_files) {
-                let image = match kind {
-                    AuxKind::Albedo => &out.albedo,
-                    AuxKind::Normal => &out.normal,
-                    AuxKind::Diffuse => &out.diffuse,
-                    AuxKind::Specular => &out.specular,
-                };
-                write_rgb(ctx.layout.path(file), image)?;
+            for (&kind, file) in AuxKind::ALL.iter().zip(&aux_files) {
+                write_rgb(ctx.layout.path(file), aux_image(&out, kind))?;
             }
             ctx.rendered += 1;
             AuxRecord {
                 spp: plan.aux_spp,
                 seed: aux_seed,
                 render_seconds: out.seconds,
-                albedo: aux_files[0].clone(),
-                normal: aux_files[1].clone(),
-                diffuse: aux_files[2].clone(),
-                specular: aux_files[3].clone(),
+                files: AuxFiles::from_fn(|kind| Layout::aux_name(name, &view, kind)),
             }
         }
     };
-    // OIDN's toolkit reads `<scene>_<view>_<spp>.alb.exr` / `.nrm.exr` beside every noisy render.
-    for &spp in &spps {
-        for kind in AuxKind::OIDN {
-            let src = ctx.layout.path(aux.file(kind));
-            link_or_copy(&src, &ctx.layout.path(&Layout::noisy_aux_name(name, &view, spp, kind)))?;
-        }
-    }
     progress.aux = Some(aux);
     ctx.record(&progress)?;
     ctx.advance();

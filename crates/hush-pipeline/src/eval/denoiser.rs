@@ -41,6 +41,14 @@ impl Denoiser {
         Ok(Denoiser { net, info })
     }
 
+    /// OIDN's official weights built into hush ([`crate::official`]).
+    pub fn official(weights: &crate::official::OfficialWeights) -> Result<Denoiser> {
+        let device = crate::device(None)?;
+        let (net, info) = load_tza(weights.bytes, Some(weights.features()), &device)
+            .with_context(|| format!("loading the built-in {}", weights.method_name()))?;
+        Ok(Denoiser { net: Net::from(net), info })
+    }
+
     /// The auxiliary features the model needs, in input order.
     pub fn features(&self) -> &[Feature] {
         &self.info.features.aux

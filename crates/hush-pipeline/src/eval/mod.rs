@@ -11,13 +11,14 @@ mod pictures;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use hush_dataset::{Image, Manifest, Split, load_view, write_png_preview};
+use hush_dataset::{AuxSource, Image, Manifest, Split, load_view, write_png_preview};
 use hush_eval::{REFERENCE, Report, Row, compare, exposure_of};
 
 pub use denoiser::{Denoiser, aux_of};
 pub use methods::{BASELINES, Method, Model, Run, baseline, method_name};
 
 use crate::Observer;
+use crate::official::{OIDN_VERSION, official_for};
 use methods::Noisy;
 use pictures::{file_safe, pictures_of};
 
@@ -36,6 +37,12 @@ pub struct EvalPlan {
     pub out: PathBuf,
     /// Denoise time is the median of this many warm runs.
     pub timing_runs: usize,
+    /// Which auxiliary images the denoisers get with each noisy input: its own (default) or the view's clean
+    /// ones.
+    pub aux: AuxSource,
+    /// Also evaluate OIDN's official weights (built in, run by hush) for each feature set among the models
+    /// (color + albedo + normal without models): the generic model every hush model must beat.
+    pub official: bool,
 }
 
 impl EvalPlan {
@@ -50,6 +57,8 @@ impl EvalPlan {
             spp: Vec::new(),
             out: out.into(),
             timing_runs: Self::DEFAULT_TIMING_RUNS,
+            aux: AuxSource::default(),
+            official: true,
         }
     }
 }
@@ -64,11 +73,35 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
     }
     let mut report = Report::default();
     let mut methods: Vec<Box<dyn Method>> = vec![Box::new(Noisy)];
+    let mut sets: Vec<hush_net::InputFeatures> = Vec::new();
     for path in &plan.models {
         let (name, denoiser) = (method_name(path), Denoiser::load(path)?);
         let info = &denoiser.info;
         report.notes.push(format!("Model {name}: {} on features {}.", info.net.describe(), info.features));
+        if !sets.contains(&info.features) {
+            sets.push(info.features.clone());
+        }
         methods.push(Box::new(Model { name, denoiser }));
+    }
+    if plan.official {
+        if sets.is_empty() {
+            sets.push(crate::train::parse_features(crate::train::DEFAULT_FEATURES)?);
+        }
+        let mut names = Vec::new();
+        for features in &sets {
+            let weights = official_for(features);
+            if names.contains(&weights.name) {
+                continue;
+            }
+            names.push(weights.name);
+            report.notes.push(format!(
+                "{}: Open Image Denoise {OIDN_VERSION}'s official weights for {}, run by hush (bit-exact with OIDN's \
+                 runtime on its golden inputs).",
+                weights.method_name(),
+                weights.features()
+            ));
+            methods.push(Box::new(Model { name: weights.method_name(), denoiser: Denoiser::official(&weights)? }));
+        }
     }
     let all: Vec<String> = BASELINES.iter().map(|(name, _)| name.to_string()).collect();
     let baselines = if plan.baselines.iter().any(|b| b == "all") { &all } else { &plan.baselines };
@@ -88,7 +121,16 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
 
-    report.notes.insert(0, format!("Dataset: {}; test views: {}.", plan.dataset.display(), views.len()));
+    report.notes.insert(
+        0,
+        format!(
+            "Dataset: {}; test views: {}; auxiliary inputs: {} (`--aux {}`).",
+            plan.dataset.display(),
+            views.len(),
+            plan.aux.describe(),
+            plan.aux
+        ),
+    );
     report.notes.push(format!(
         "Machine: {}{} logical CPUs{}; denoise time is the median of {} warm runs on {}; render times are those \
          the dataset's manifest recorded on the machine that rendered it.",
@@ -109,7 +151,7 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
         };
         let mut reference_row = true;
         for spp in spps {
-            let images = load_view(&plan.dataset, view, spp)?;
+            let images = load_view(&plan.dataset, view, spp, plan.aux)?;
             let exposure = exposure_of(&images.reference)?;
             let preview = |method: &str, image: &Image| -> Result<String> {
                 let file = format!("{name}_{spp:06}_{}.png", file_safe(method));

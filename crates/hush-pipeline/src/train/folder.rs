@@ -126,11 +126,21 @@ pub fn incompatibilities(stored: &RunConfig, now: &RunConfig) -> Vec<String> {
         .filter(|(k, _, _)| !matches!(k.as_str(), "steps" | "eval_every"))
         .map(|(k, a, b)| match k.as_str() {
             "features" => format!("features: {} in the run, {} now", stored.train.features, now.train.features),
+            "init" => {
+                let show = |i: &Option<hush_train::InitRecord>| match i {
+                    Some(i) => format!("{} (FNV-1a {})", i.source, i.fnv1a),
+                    None => "random weights".into(),
+                };
+                format!("init: {} in the run, {} now", show(&stored.train.init), show(&now.train.init))
+            }
             _ => format!("{k}: {a} in the run, {b} now"),
         })
         .collect();
     if stored.dataset != now.dataset {
         out.push(format!("dataset: {} in the run, {} now", stored.dataset.display(), now.dataset.display()));
+    }
+    if stored.aux != now.aux {
+        out.push(format!("aux: {} in the run, {} now", stored.aux, now.aux));
     }
     if stored.spp != now.spp {
         out.push(format!("spp: {:?} in the run, {:?} now", stored.spp, now.spp));

@@ -10,12 +10,12 @@ use std::ops::ControlFlow;
 
 use anyhow::{Context, Result, bail};
 use hush_dataset::{Manifest, Split};
-use hush_train::{TrainError, read_train_state, train};
+use hush_train::{Start, TrainError, read_train_state, train};
 
 pub use folder::{RunFolder, incompatibilities};
 pub use options::{
-    DEFAULT_DEVICE, DEFAULT_FEATURES, DEFAULT_WIDTH, RunConfig, TrainOptions, defaults, parse_features, parse_loss,
-    resolve,
+    DEFAULT_DEVICE, DEFAULT_FEATURES, DEFAULT_FINETUNE_LR, DEFAULT_WIDTH, INIT_OIDN, RunConfig, TrainOptions, defaults,
+    parse_aux, parse_features, parse_loss, read_init, resolve,
 };
 
 use crate::Observer;
@@ -90,6 +90,31 @@ pub fn run(options: TrainOptions, observer: &dyn Observer) -> Result<TrainOutcom
         _ if args.resume.is_some() => bail!("--resume {}: it has no checkpoints/last.safetensors yet", out.display()),
         _ => None,
     };
+    // A run that starts from trained weights reads them again (a run killed before its first checkpoint
+    // starts over from them), and they must still be the file the configuration recorded.
+    let init = match (&cfg.train.init, &resume_bytes) {
+        (Some(record), None) => {
+            let (weights, now) = read_init(std::path::Path::new(&record.source), Some(&cfg.train.features))?;
+            if now.fnv1a != record.fnv1a {
+                bail!(
+                    "{} changed since the run in {} was configured with it (FNV-1a {} then, {} now); restore it, \
+                     or delete the run folder to start over",
+                    record.source,
+                    out.display(),
+                    record.fnv1a,
+                    now.fnv1a
+                );
+            }
+            Some(weights)
+        }
+        _ => None,
+    };
+    if let Some(record) = &cfg.train.init {
+        observer.note(&format!(
+            "starting from {} ({}) at a learning rate of {}",
+            record.source, record.features, cfg.train.lr
+        ));
+    }
     // The samples after the cheap checks above, before anything is written.
     let loading = std::time::Instant::now();
     let (samples, names) = load_split(&cfg, &manifest, Split::Train, observer)?;
@@ -111,18 +136,24 @@ pub fn run(options: TrainOptions, observer: &dyn Observer) -> Result<TrainOutcom
     let t = &cfg.train;
     let epochs = t.steps.div_ceil(t.epoch_steps);
     observer.note(&format!(
-        "training on {} images, testing on {} (ready in {load_seconds:.2} s), with {}: {} steps = {epochs} epochs of \
-         {} steps",
+        "training on {} images, testing on {} (ready in {load_seconds:.2} s), with {} ({} auxiliary images): {} \
+         steps = {epochs} epochs of {} steps",
         samples.len(),
         test.len(),
         t.features,
+        cfg.aux,
         t.steps,
         t.epoch_steps
     ));
     observer.task("train", "steps", t.steps as u64, start_step as u64);
     let mut write_error = None;
     let device = crate::device(Some(&cfg.device))?;
-    let result = train(t, &samples, &test, &device, resume_bytes.as_deref(), |report| {
+    let start = match (&resume_bytes, &init) {
+        (Some(bytes), _) => Start::Resume(bytes),
+        (None, Some(weights)) => Start::Init(weights),
+        (None, None) => Start::Fresh,
+    };
+    let result = train(t, &samples, &test, &device, start, |report| {
         let r = &report.row;
         let rate = (r.step - start_step) as f64 / r.seconds.max(1e-9);
         observer.progress(r.step as u64, &format!("epoch {} loss {:.4}, {rate:.2} steps/s", r.epoch, r.loss));

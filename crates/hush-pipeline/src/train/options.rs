@@ -3,8 +3,9 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
-use hush_net::{Activation, InputFeatures, Loss, NetConfig, PatchMlpConfig, UNetConfig, UNetKind};
-use hush_train::{Augment, OptimizerConfig, Schedule, TrainConfig};
+use hush_dataset::AuxSource;
+use hush_net::{Activation, InputFeatures, Loss, NetConfig, PatchMlpConfig, Pretrained, UNetConfig, UNetKind};
+use hush_train::{Augment, InitRecord, OptimizerConfig, Schedule, TrainConfig};
 use serde::{Deserialize, Serialize};
 
 /// The input features when none are given.
@@ -13,6 +14,9 @@ pub const DEFAULT_FEATURES: &str = "color,albedo,normal";
 pub const DEFAULT_WIDTH: f64 = 0.25;
 /// The device when none is given.
 pub const DEFAULT_DEVICE: &str = "cpu";
+/// The learning rate of a run that starts from trained weights (`--init`) when none is given: a tenth of
+/// [`defaults`]' 1e-3, which would first undo much of what the weights know.
+pub const DEFAULT_FINETUNE_LR: f64 = 1e-4;
 
 /// The training configuration of a run that gives no options but its features: the thesis's recipe
 /// ([`TrainConfig::thesis`]: the MIX loss, Adam, a constant schedule, PU transfer, flips, batch 4) sized for a
@@ -48,6 +52,11 @@ pub struct TrainOptions {
     #[cfg_attr(feature = "clap", arg(long))]
     #[serde(skip)]
     pub resume: Option<PathBuf>,
+    /// Start from trained weights (fine-tuning): `oidn` (OIDN 2.5.1's official weights for --features, built
+    /// in), an OIDN `.tza` file or a hush `model.safetensors`. The network, its width, features and transfer
+    /// come from the weights; more --features than they take start at zero weights; --lr defaults to 1e-4.
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub init: Option<PathBuf>,
     /// Dataset folder (from `hush dataset`): its training split is trained on, its test split measured.
     #[cfg_attr(feature = "clap", arg(long))]
     pub dataset: Option<PathBuf>,
@@ -58,6 +67,10 @@ pub struct TrainOptions {
     /// names M_n, M_ann, M_dsnn [default: color,albedo,normal].
     #[cfg_attr(feature = "clap", arg(long))]
     pub features: Option<String>,
+    /// Auxiliary inputs: `noisy` (each noisy render's own, at its spp: what a user denoising a render has) or
+    /// `clean` (the view's, rendered once at the dataset's --aux-spp) [default: noisy].
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub aux: Option<String>,
     /// Noisy images of these spp are the inputs (all of them if not given).
     #[cfg_attr(feature = "clap", arg(long, value_delimiter = ','))]
     pub spp: Option<Vec<u32>>,
@@ -124,7 +137,19 @@ pub struct RunConfig {
     pub spp: Vec<u32>,
     /// `cpu` or `cuda`.
     pub device: String,
+    /// Which auxiliary images go with each noisy input; runs from before the choice trained on the clean ones.
+    #[serde(default = "clean_aux")]
+    pub aux: AuxSource,
     pub train: TrainConfig,
+}
+
+fn clean_aux() -> AuxSource {
+    AuxSource::Clean
+}
+
+/// Parses `--aux`.
+pub fn parse_aux(s: &str) -> Result<AuxSource> {
+    AuxSource::parse(s).with_context(|| format!("unknown --aux '{s}': use noisy or clean"))
 }
 
 impl TrainOptions {
@@ -134,6 +159,8 @@ impl TrainOptions {
             ($($f:ident),*) => { TrainOptions { config: self.config, resume: self.resume, $($f: self.$f.or(file.$f)),* } };
         }
         merge!(
+            init,
+            aux,
             dataset,
             out,
             features,
@@ -229,8 +256,36 @@ pub fn parse_loss(s: &str) -> Result<Loss> {
     })
 }
 
+/// `--init`'s name for OIDN's official weights built into hush ([`crate::official`]).
+pub const INIT_OIDN: &str = "oidn";
+
+/// Reads the trained weights of `--init` and their record: a file, or [`INIT_OIDN`] for OIDN's official
+/// weights of `features` (those with albedo and normal when OIDN has none of exactly these features).
+pub fn read_init(init: &Path, features: Option<&InputFeatures>) -> Result<(Pretrained, InitRecord)> {
+    let (name, bytes) = match init.to_str().and_then(|s| s.strip_prefix(INIT_OIDN)) {
+        Some(rest) if rest.is_empty() || rest.starts_with('-') => {
+            let official = match rest.strip_prefix(&format!("-{}", crate::official::OIDN_VERSION)) {
+                Some(name) if !name.is_empty() => crate::official::official(name.trim_start_matches(' '))
+                    .with_context(|| format!("--init {}: no such official OIDN weights", init.display()))?,
+                _ => crate::official::official_for(features.unwrap_or(&parse_features(DEFAULT_FEATURES)?)),
+            };
+            (official.method_name(), std::borrow::Cow::Borrowed(official.bytes))
+        }
+        _ => {
+            let bytes = std::fs::read(init).with_context(|| {
+                format!("reading --init {} (a .tza or .safetensors file, or `{INIT_OIDN}`)", init.display())
+            })?;
+            (init.display().to_string(), std::borrow::Cow::Owned(bytes))
+        }
+    };
+    let weights = Pretrained::read(&bytes, &candle_core::Device::Cpu)
+        .with_context(|| format!("--init {name}: not weights hush can start from"))?;
+    let record = InitRecord::of(name, &bytes, weights.info.features.clone());
+    Ok((weights, record))
+}
+
 /// Builds the run's configuration from the options, taking what they do not give from `base` (the run
-/// being resumed) or else the defaults; `train_images` sizes an epoch.
+/// being resumed), the `--init` weights (read here) or else the defaults; `train_images` sizes an epoch.
 ///
 /// ```
 /// use hush_pipeline::TrainOptions;
@@ -247,12 +302,32 @@ pub fn parse_loss(s: &str) -> Result<Loss> {
 /// ```
 pub fn resolve(args: &TrainOptions, base: Option<&RunConfig>, train_images: usize) -> Result<RunConfig> {
     let b = base.map(|c| &c.train);
-    let features = match &args.features {
-        Some(f) => parse_features(f)?,
-        None => b.map_or_else(|| parse_features(DEFAULT_FEATURES), |b| Ok(b.features.clone()))?,
+    let asked = args.features.as_deref().map(parse_features).transpose()?;
+    let init = match &args.init {
+        Some(path) => Some(read_init(path, asked.as_ref().or(b.map(|b| &b.features)))?),
+        None => None,
     };
-    // What an option not given takes: the run being resumed, or else the defaults.
-    let d = b.cloned().unwrap_or_else(|| defaults(features.clone()));
+    let init_features = init.as_ref().map(|(w, _)| w.info.features.clone());
+    let features = match asked {
+        Some(f) => f,
+        None => match (b, init_features) {
+            (Some(b), _) => b.features.clone(),
+            (None, Some(f)) => f,
+            (None, None) => parse_features(DEFAULT_FEATURES)?,
+        },
+    };
+    // What an option not given takes: the run being resumed, the initial weights, or else the defaults.
+    let d = match (b, &init) {
+        (Some(b), _) => b.clone(),
+        (None, Some((w, record))) => TrainConfig {
+            net: w.info.net.with_in_channels(features.in_channels()),
+            transfer: w.info.transfer,
+            lr: DEFAULT_FINETUNE_LR,
+            init: Some(record.clone()),
+            ..defaults(features.clone())
+        },
+        (None, None) => defaults(features.clone()),
+    };
     let base_arch = match &d.net {
         NetConfig::PatchMlp(c) => Arch::PatchMlp(c.activation),
         NetConfig::UNet(c) => Arch::UNet(c.kind),
@@ -261,11 +336,11 @@ pub fn resolve(args: &TrainOptions, base: Option<&RunConfig>, train_images: usiz
         Some(a) => parse_arch(a)?,
         None => base_arch,
     };
-    let net = match (b, args.width) {
-        // Resuming with the run's own kind of network and no new width: the run's network as it was (an
-        // MLP's hidden sizes, σ and patch included), whatever repeats its `--arch`.
-        (Some(b), None) if base_arch == arch => b.net.with_in_channels(features.in_channels()),
-        (_, width) => {
+    let net = match args.width {
+        // Resuming (or starting from trained weights) with that network's kind and no new width: the
+        // network as it was (an MLP's hidden sizes, σ and patch included), whatever repeats its `--arch`.
+        None if base_arch == arch && (b.is_some() || init.is_some()) => d.net.with_in_channels(features.in_channels()),
+        width => {
             let base_width = d.net.as_unet().map(|c| c.width);
             arch.config(features.in_channels(), width.or(base_width).unwrap_or(DEFAULT_WIDTH))
         }
@@ -322,7 +397,26 @@ pub fn resolve(args: &TrainOptions, base: Option<&RunConfig>, train_images: usiz
         seed: args.seed.unwrap_or(d.seed),
         eval_every: args.eval_every.unwrap_or(d.eval_every),
         clip_grad_norm: args.clip_grad_norm.or(d.clip_grad_norm),
+        // The same weights named by another path are the same start.
+        init: match (&init, &d.init) {
+            (Some((_, now)), Some(then)) if now.fnv1a == then.fnv1a => Some(then.clone()),
+            (Some((_, now)), _) => Some(now.clone()),
+            (None, then) => then.clone(),
+        },
     };
+    if let Some((weights, record)) = &init {
+        // The network is the one the weights are; --arch and --width may only repeat it.
+        let adapted = weights.adapt(&train.features).with_context(|| format!("--init {}", record.source))?;
+        if adapted.info.net != train.net {
+            bail!(
+                "--init {} holds a {}, but the options ask for a {}; drop --arch and --width to train the \
+                 network the weights are",
+                record.source,
+                adapted.info.net.describe(),
+                train.net.describe()
+            );
+        }
+    }
     train.validate()?;
     let dataset = args
         .dataset
@@ -330,7 +424,11 @@ pub fn resolve(args: &TrainOptions, base: Option<&RunConfig>, train_images: usiz
         .or(base.map(|c| c.dataset.clone()))
         .context("--dataset is required (or `dataset = ...` in --config)")?;
     let spp = args.spp.clone().or(base.map(|c| c.spp.clone())).unwrap_or_default();
-    Ok(RunConfig { dataset, spp, device, train })
+    let aux = match &args.aux {
+        Some(a) => parse_aux(a)?,
+        None => base.map_or(AuxSource::default(), |c| c.aux),
+    };
+    Ok(RunConfig { dataset, spp, device, aux, train })
 }
 
 #[cfg(test)]

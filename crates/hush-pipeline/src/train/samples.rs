@@ -35,15 +35,19 @@ pub(crate) fn load_split(
     // The file is named by what the samples are (features, transfer, split, views and spp), so a changed
     // dataset replaces its cache rather than adding one; the key inside also covers the records of this
     // split's views (files, seeds, sizes) and how samples are prepared, and a mismatch rebuilds the file.
-    let what =
-        format!("features {features}, transfer {:?}, {split:?} split, samples {}", Transfer::Pu, names.join(" "));
+    let what = format!(
+        "features {features} ({} aux), transfer {:?}, {split:?} split, samples {}",
+        cfg.aux,
+        Transfer::Pu,
+        names.join(" ")
+    );
     let views: Vec<_> = manifest.split(split).collect();
     let key = format!("views {:016x}, preparation {PREPARATION_VERSION}, {what}", fnv1a(&serde_json::to_vec(&views)?));
     let path = cfg.dataset.join("cache").join(format!("{split:?}-{:016x}.f16", fnv1a(what.as_bytes())).to_lowercase());
     let samples = cached_samples(&path, &key, observer, || {
         let mut samples = Vec::new();
         for &(view, spp) in &records {
-            let images = load_view(&cfg.dataset, view, spp)?;
+            let images = load_view(&cfg.dataset, view, spp, cfg.aux)?;
             let aux: Vec<&Image> = features.aux.iter().map(|&f| aux_of(&images, f)).collect();
             samples.push(TrainSample::from_linear(features, Transfer::Pu, &images.color, &aux, &images.reference)?);
         }

@@ -11,7 +11,7 @@ use hush_dataset::Image;
 use hush_net::transfer::{Transfer, autoexposure};
 use hush_net::{Activation, InputFeatures, PatchMlpConfig, UNetConfig, UNetKind, load_model, prepare_color};
 use hush_train::{
-    Augment, EpochRow, OptimizerConfig, Schedule, TrainConfig, TrainError, TrainSample, Trained, plot_losses,
+    Augment, EpochRow, OptimizerConfig, Schedule, Start, TrainConfig, TrainError, TrainSample, Trained, plot_losses,
     read_train_state, train,
 };
 
@@ -53,7 +53,7 @@ fn config(steps: usize) -> TrainConfig {
 }
 
 fn run(cfg: &TrainConfig, samples: &[TrainSample]) -> hush_train::Result<Trained> {
-    train(cfg, samples, &[], &Device::Cpu, None, |_| ControlFlow::Continue(()))
+    train(cfg, samples, &[], &Device::Cpu, Start::Fresh, |_| ControlFlow::Continue(()))
 }
 
 fn losses(t: &Trained) -> Vec<f64> {
@@ -180,7 +180,7 @@ fn epochs_report_metrics_and_checkpoints() {
     let mut cfg = config(7);
     (cfg.batch, cfg.eval_every) = (2, 2); // 2 steps per epoch: epochs end at steps 2, 4, 6 and 7
     let mut got = Vec::new();
-    let trained = train(&cfg, &samples, &test, &Device::Cpu, None, |r| {
+    let trained = train(&cfg, &samples, &test, &Device::Cpu, Start::Fresh, |r| {
         if let Some((row, bytes)) = r.epoch {
             got.push((row, bytes));
         }
@@ -220,7 +220,7 @@ fn resume_continues_exactly() {
         let mut cfg = config(6);
         (cfg.batch, cfg.optimizer, cfg.schedule, cfg.augment) = (2, optimizer, schedule, Augment::FlipsPermute);
         let mut checkpoint = None;
-        let full = train(&cfg, &samples, &[], &Device::Cpu, None, |r| {
+        let full = train(&cfg, &samples, &[], &Device::Cpu, Start::Fresh, |r| {
             if let Some((row, bytes)) = r.epoch
                 && row.step == 2
             {
@@ -230,8 +230,15 @@ fn resume_continues_exactly() {
         })
         .unwrap();
         let resumed =
-            train(&cfg, &samples, &[], &Device::Cpu, Some(&checkpoint.unwrap()), |_| ControlFlow::Continue(()))
-                .unwrap();
+            train(
+                &cfg,
+                &samples,
+                &[],
+                &Device::Cpu,
+                Start::Resume(&checkpoint.unwrap()),
+                |_| ControlFlow::Continue(()),
+            )
+            .unwrap();
         assert_eq!(resumed.log.iter().map(|r| r.step).collect::<Vec<_>>(), vec![3, 4, 5, 6]);
         let tail: Vec<(f64, f64)> = full.log[2..].iter().map(|r| (r.loss, r.lr)).collect();
         assert_eq!(resumed.log.iter().map(|r| (r.loss, r.lr)).collect::<Vec<_>>(), tail, "{:?}", cfg.optimizer);
@@ -246,14 +253,16 @@ fn resume_refuses_another_run() {
     let mut cfg = config(2);
     cfg.batch = 2;
     let mut checkpoint = None;
-    train(&cfg, &samples, &[], &Device::Cpu, None, |r| {
+    train(&cfg, &samples, &[], &Device::Cpu, Start::Fresh, |r| {
         checkpoint = r.epoch.map(|(_, b)| b).or(checkpoint.take());
         ControlFlow::Continue(())
     })
     .unwrap();
     let checkpoint = checkpoint.unwrap();
     let resume = |c: &TrainConfig, s: &[TrainSample]| {
-        train(c, s, &[], &Device::Cpu, Some(&checkpoint), |_| ControlFlow::Continue(())).unwrap_err().to_string()
+        train(c, s, &[], &Device::Cpu, Start::Resume(&checkpoint), |_| ControlFlow::Continue(()))
+            .unwrap_err()
+            .to_string()
     };
     let mut wider = cfg.clone();
     (wider.net, wider.steps) = (UNetConfig { width: 0.5, ..cfg.net.as_unet().unwrap().clone() }.into(), 4);
@@ -308,7 +317,7 @@ fn gradient_clipping_bounds_the_update() {
 #[test]
 fn observer_can_stop_training() {
     let samples = synthetic(2);
-    let trained = train(&config(10), &samples, &[], &Device::Cpu, None, |r| {
+    let trained = train(&config(10), &samples, &[], &Device::Cpu, Start::Fresh, |r| {
         if r.row.step == 2 { ControlFlow::Break(()) } else { ControlFlow::Continue(()) }
     })
     .unwrap();
@@ -358,4 +367,35 @@ fn samples_from_linear_images_share_the_reference_exposure() {
     let small = Image::from_fn(8, 8, 3, |_, _, _| 1.0);
     let err = TrainSample::from_linear(&features, Transfer::Pu, &color, &[&small], &reference).unwrap_err();
     assert!(err.to_string().contains("nrm is 8x8x3"), "{err}");
+}
+
+/// Starting from trained weights: the run's first loss is the trained model's (it starts where that model
+/// ended, not from random weights), and weights or a configuration that do not match are refused.
+#[test]
+fn training_starts_from_trained_weights() {
+    let samples = synthetic(2);
+    let first = run(&config(30), &samples).unwrap();
+    let weights = hush_net::Pretrained::read(&first.weights, &Device::Cpu).unwrap();
+    let mut cfg = config(1);
+    cfg.init = Some(hush_train::InitRecord::of("first.safetensors", &first.weights, weights.info.features.clone()));
+    let from_trained =
+        train(&cfg, &samples, &[], &Device::Cpu, Start::Init(&weights), |_| ControlFlow::Continue(())).unwrap();
+    let from_random = run(&config(1), &samples).unwrap();
+    let (start, random) = (from_trained.log[0].loss, from_random.log[0].loss);
+    let trained_loss = first.log.last().unwrap().loss;
+    assert!(start < random && (start - trained_loss).abs() < (random - trained_loss).abs(), "{start} {random}");
+
+    let err = run(&cfg, &samples).unwrap_err().to_string();
+    assert!(err.contains("starts from first.safetensors") && err.contains("no initial weights"), "{err}");
+    let mut wider = cfg.clone();
+    wider.net = UNetConfig { width: 0.5, ..cfg.net.as_unet().unwrap().clone() }.into();
+    let err = train(&wider, &samples, &[], &Device::Cpu, Start::Init(&weights), |_| ControlFlow::Continue(()))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("width 0.25") && err.contains("width 0.5"), "{err}");
+    let unrecorded = config(1);
+    let err = train(&unrecorded, &samples, &[], &Device::Cpu, Start::Init(&weights), |_| ControlFlow::Continue(()))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("does not record them"), "{err}");
 }

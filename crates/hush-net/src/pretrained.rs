@@ -1,0 +1,248 @@
+//! Trained weights to start a training run from (fine-tuning): OIDN's official TZA weights or a hush model,
+//! matched to the network being trained tensor by tensor, by name and shape.
+//!
+//! **Changing the input features.** A network trained on one feature set can start one that takes more: the
+//! first convolution's weights are copied per input feature, 3 channels at a time, by feature
+//! ([`Pretrained::adapt`]):
+//! * the color and every feature the source also had keep their weights (in every convolution that reads the
+//!   input: the first, and the last decoder level's, which the U-Net's skip feeds the input too);
+//! * `diffuse` takes the source's `albedo` weights when the source had albedo but no diffuse (on diffuse
+//!   surfaces the albedo *is* the diffuse reflectance, so OIDN's `alb,nrm` weights start a `diff,spec,nrm`
+//!   network close to where they were);
+//! * every other new feature starts at zero, so it changes nothing until training gives it weight.
+//!
+//! With only same-name copies and zeros, the adapted network computes exactly what the source did. A feature
+//! the source had that the new set drops is refused: its weights cannot be removed without changing what the
+//! network computes (start from weights trained without it, e.g. OIDN's `rt_hdr.tza` for color only).
+//! The patch MLP's first layer mixes channels within patches; it keeps its features as they were.
+
+use std::collections::HashMap;
+
+use candle_core::{DType, Device, Result, Tensor, bail};
+use candle_nn::VarMap;
+
+use crate::input::{Feature, InputFeatures};
+use crate::net::NetConfig;
+use crate::transfer::Transfer;
+use crate::tza::{infer_config, oidn_features, parse_tza};
+use crate::unet::UNetConfig;
+use crate::weights::{ModelInfo, read_metadata};
+
+/// A trained network's tensors by name and what it is ([`ModelInfo`]).
+#[derive(Clone, Debug)]
+pub struct Pretrained {
+    pub info: ModelInfo,
+    pub tensors: Vec<(String, Tensor)>,
+}
+
+impl Pretrained {
+    /// Reads a TZA archive (OIDN's official weights: features from the channel count as
+    /// [`oidn_features`], PU transfer) or a self-describing hush safetensors file, told apart by their
+    /// first bytes.
+    pub fn read(bytes: &[u8], device: &Device) -> Result<Pretrained> {
+        if bytes.starts_with(&[0xD7, 0x41]) {
+            Self::from_tza(bytes, device)
+        } else {
+            Self::from_safetensors(bytes, device)
+        }
+    }
+
+    /// OIDN's TZA weights.
+    pub fn from_tza(bytes: &[u8], device: &Device) -> Result<Pretrained> {
+        let tensors = parse_tza(bytes)?;
+        let net = infer_config(&tensors)?;
+        let features = oidn_features(net.in_channels)?;
+        let info = ModelInfo { net: net.into(), features, transfer: Transfer::Pu };
+        let tensors = tensors
+            .into_iter()
+            .map(|t| Ok((t.name, Tensor::from_vec(t.values, t.dims, device)?)))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Pretrained { info, tensors })
+    }
+
+    /// A hush model (`model.safetensors` of `hush train`, whose metadata says what it is).
+    pub fn from_safetensors(bytes: &[u8], device: &Device) -> Result<Pretrained> {
+        let Some(info) = read_metadata(bytes)? else {
+            bail!("the weight file is neither a TZA archive nor a hush model (its safetensors metadata has no network)")
+        };
+        info.validate()?;
+        let mut tensors = candle_core::safetensors::load_buffer(bytes, device)?
+            .into_iter()
+            .map(|(k, v)| Ok((k, v.to_dtype(DType::F32)?)))
+            .collect::<Result<Vec<_>>>()?;
+        tensors.sort_by(|a, b| a.0.cmp(&b.0));
+        Ok(Pretrained { info, tensors })
+    }
+
+    /// These weights for a network taking `features` (the module docs say how channels are matched). The
+    /// same features return the weights unchanged.
+    pub fn adapt(&self, features: &InputFeatures) -> Result<Pretrained> {
+        let from = &self.info.features;
+        if from == features {
+            return Ok(self.clone());
+        }
+        let NetConfig::UNet(unet) = &self.info.net else {
+            bail!("a patch MLP's input features cannot change: train it with {from}, its features")
+        };
+        let takes_albedo_as_diffuse = |f: &Feature| {
+            *f == Feature::Albedo && features.aux.contains(&Feature::Diffuse) && !from.aux.contains(&Feature::Diffuse)
+        };
+        if let Some(dropped) = from.aux.iter().find(|f| !features.aux.contains(f) && !takes_albedo_as_diffuse(f)) {
+            bail!(
+                "the weights take {from}; {features} drops {}, whose weights cannot be removed without changing \
+                 what the network computes; start from weights trained without it or keep the feature",
+                dropped.long_name()
+            )
+        }
+        // The source's input channel of each new feature's first channel: color at 0, then its features.
+        let source_slot = |f: Feature| from.aux.iter().position(|&g| g == f).map(|i| 3 + 3 * i);
+        let slots: Vec<Option<usize>> = std::iter::once(Some(0))
+            .chain(features.aux.iter().map(|&f| {
+                source_slot(f).or(match f {
+                    Feature::Diffuse => source_slot(Feature::Albedo),
+                    _ => None,
+                })
+            }))
+            .collect();
+        // Every convolution that reads the network's input (the first, and with skips the last decoder
+        // level's first, which concatenates the input after the upsampled features) takes more channels.
+        let target = UNetConfig { in_channels: features.in_channels(), ..unet.clone() };
+        let source_input = unet.in_channels;
+        let mut tensors = self.tensors.clone();
+        for (old, new) in unet.conv_shapes().iter().zip(target.conv_shapes()) {
+            if old.in_channels == new.in_channels {
+                continue;
+            }
+            let name = format!("{}.weight", old.name);
+            let Some((_, w)) = tensors.iter_mut().find(|(n, _)| *n == name) else {
+                bail!("the weights have no {name}")
+            };
+            let (out, channels, kh, kw) = w.dims4()?;
+            let offset = channels - source_input;
+            let mut parts = vec![w.narrow(1, 0, offset)?];
+            for slot in &slots {
+                parts.push(match slot {
+                    Some(s) => w.narrow(1, offset + s, 3)?,
+                    None => Tensor::zeros((out, 3, kh, kw), w.dtype(), w.device())?,
+                });
+            }
+            *w = Tensor::cat(&parts, 1)?;
+        }
+        let info = ModelInfo {
+            net: self.info.net.with_in_channels(features.in_channels()),
+            features: features.clone(),
+            ..self.info.clone()
+        };
+        info.validate()?;
+        Ok(Pretrained { info, tensors })
+    }
+
+    /// Sets every variable of `varmap` (a network built for `self.info.net`) from these weights. Fails
+    /// naming the first variable (in name order) that is missing here or has another shape, or the first
+    /// tensor here the network does not have.
+    pub fn load_into(&self, varmap: &VarMap) -> Result<()> {
+        let vars = varmap.data().lock().map_err(|_| candle_core::Error::Msg("VarMap lock poisoned".into()))?;
+        let have: HashMap<&str, &Tensor> = self.tensors.iter().map(|(n, t)| (n.as_str(), t)).collect();
+        let mut names: Vec<&String> = vars.keys().collect();
+        names.sort();
+        for name in &names {
+            let var = &vars[*name];
+            match have.get(name.as_str()) {
+                None => bail!("the initial weights have no tensor {name}, which the network needs"),
+                Some(t) if t.dims() != var.dims() => {
+                    bail!("{name} is {:?} in the initial weights but {:?} in the network", t.dims(), var.dims())
+                }
+                Some(_) => {}
+            }
+        }
+        let mut extra: Vec<&str> = have.keys().copied().filter(|n| !vars.contains_key(*n)).collect();
+        extra.sort();
+        if let Some(first) = extra.first() {
+            bail!("the initial weights hold {first}, which the network does not have ({} such tensors)", extra.len())
+        }
+        for name in names {
+            let var = &vars[name];
+            var.set(&have[name.as_str()].to_device(var.device())?.to_dtype(var.dtype())?)?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use candle_core::Module;
+    use candle_nn::VarBuilder;
+
+    use super::*;
+    use crate::Net;
+    use crate::unet::{UNetConfig, UNetKind, init_weights};
+    use crate::weights::save_weights;
+
+    fn model(features: &str, width: f64, seed: u64) -> (VarMap, ModelInfo) {
+        let features = InputFeatures::parse(features).unwrap();
+        let net: NetConfig =
+            UNetConfig { kind: UNetKind::UnetSmall, in_channels: features.in_channels(), out_channels: 3, width }
+                .into();
+        let varmap = VarMap::new();
+        Net::new(VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu), &net).unwrap();
+        init_weights(&varmap, seed).unwrap();
+        (varmap, ModelInfo { net, features, transfer: Transfer::Pu })
+    }
+
+    fn forward(varmap: &VarMap, info: &ModelInfo, x: &Tensor) -> Vec<f32> {
+        let net = Net::new(VarBuilder::from_varmap(varmap, DType::F32, &Device::Cpu), &info.net).unwrap();
+        net.forward(x).unwrap().flatten_all().unwrap().to_vec1().unwrap()
+    }
+
+    /// Adding features keeps what the network computes: an `alb,nrm` model adapted to `alb,nrm,spec`
+    /// gives the same output whatever the new specular channels hold (their weights start at zero); the
+    /// old features keep their weights. Dropping a feature, and loading into a different network, fail
+    /// naming what does not match.
+    #[test]
+    fn adapting_features_keeps_the_function_and_mismatches_are_named() {
+        let (source, info) = model("alb,nrm", 0.25, 3);
+        let bytes = save_weights(&source, &info).unwrap();
+        let pre = Pretrained::read(&bytes, &Device::Cpu).unwrap();
+        assert_eq!(pre.info, info);
+        let wider = pre.adapt(&InputFeatures::parse("alb,nrm,spec").unwrap()).unwrap();
+        let (target, target_info) = model("alb,nrm,spec", 0.25, 9);
+        assert_eq!(wider.info, target_info);
+        wider.load_into(&target).unwrap();
+
+        let x9 = Tensor::rand(0f32, 1f32, (1, 9, 16, 16), &Device::Cpu).unwrap();
+        let spec = Tensor::rand(0f32, 1f32, (1, 3, 16, 16), &Device::Cpu).unwrap();
+        let x12 = Tensor::cat(&[&x9, &spec], 1).unwrap();
+        let (a, b) = (forward(&source, &info, &x9), forward(&target, &target_info, &x12));
+        assert_eq!(a, b, "the adapted network computes what the source did");
+
+        let err = pre.adapt(&InputFeatures::parse("nrm").unwrap()).unwrap_err().to_string();
+        assert!(err.contains("drops albedo"), "{err}");
+        let (other, _) = model("alb,nrm", 0.5, 1);
+        let err = pre.load_into(&other).unwrap_err().to_string();
+        assert!(err.contains("dec_conv0.weight is [3, 8, 3, 3] in the initial weights"), "{err}");
+    }
+
+    /// `diffuse` starts from the source's albedo weights, `specular` from zero.
+    #[test]
+    fn diffuse_starts_from_albedo() {
+        let (source, info) = model("alb,nrm", 0.25, 5);
+        let pre = Pretrained::read(&save_weights(&source, &info).unwrap(), &Device::Cpu).unwrap();
+        let dsnn = pre.adapt(&InputFeatures::parse("diff,spec,nrm").unwrap()).unwrap();
+        let w = |p: &Pretrained, name: &str| p.tensors.iter().find(|(n, _)| n == name).unwrap().1.clone();
+        let (old, new) = (w(&pre, "enc_conv0.weight"), w(&dsnn, "enc_conv0.weight"));
+        let slice = |t: &Tensor, s: usize| t.narrow(1, s, 3).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        assert_eq!(slice(&new, 0), slice(&old, 0), "color");
+        assert_eq!(slice(&new, 3), slice(&old, 3), "diffuse from albedo");
+        assert!(slice(&new, 6).iter().all(|v| *v == 0.0), "specular from zero");
+        assert_eq!(slice(&new, 9), slice(&old, 6), "normal");
+        // The skip into the last decoder level carries the input after 8 upsampled channels.
+        let (old, new) = (w(&pre, "dec_conv1a.weight"), w(&dsnn, "dec_conv1a.weight"));
+        assert_eq!(new.dims(), &[8, 8 + 12, 3, 3]);
+        let head = |t: &Tensor| t.narrow(1, 0, 8).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        assert_eq!(head(&new), head(&old), "the upsampled features' weights");
+        assert_eq!(slice(&new, 8), slice(&old, 8), "color in the skip");
+        assert_eq!(slice(&new, 8 + 3), slice(&old, 8 + 3), "diffuse from albedo in the skip");
+        assert!(slice(&new, 8 + 6).iter().all(|v| *v == 0.0));
+        assert_eq!(slice(&new, 8 + 9), slice(&old, 8 + 6), "normal in the skip");
+    }
+}
