@@ -2,8 +2,9 @@
 //! `pyoidn`), BM3D, flip-evaluator and scikit-image (the versions pinned in
 //! `crates/hush-eval/baselines/requirements.txt`) into a venv under `target/baselines-venv`, and
 //! `cargo xtask baselines check` runs BM3D and OIDN through hush-eval on a 64² crop of the Cornell box and
-//! checks that they lower its error (the test `external::run_for_real_when_installed`, required to run),
-//! then that hush-eval's `oidn` feature, built against pyoidn's bundled library, reproduces OIDN's outputs.
+//! checks that they lower its error (the test `external::run_for_real_when_installed`, required to run), that
+//! OIDN's runtime runs weights written as hush writes them (`hush export`) as hush does
+//! (`external::oidn_runtime_runs_other_weights_as_hush_does`, ≥ 45 dB), then that hush-eval's `oidn` feature, built against pyoidn's bundled library, reproduces OIDN's outputs.
 
 use std::path::PathBuf;
 use std::process::Command;
@@ -65,11 +66,9 @@ fn check() -> Result<()> {
         cmd.args(["--test", "it", filter, "--", "--nocapture"]);
         cmd
     };
-    spawn(
-        test(&[], "external::run_for_real_when_installed")
-            .env("HUSH_REQUIRE_BASELINES", "1")
-            .env("HUSH_BASELINES_PYTHON", venv_python()),
-    )?;
+    for filter in ["external::run_for_real_when_installed", "external::oidn_runtime_runs_other_weights_as_hush_does"] {
+        spawn(test(&[], filter).env("HUSH_REQUIRE_BASELINES", "1").env("HUSH_BASELINES_PYTHON", venv_python()))?;
+    }
     let oidn_dir = oidn_dir()?;
     spawn(
         test(&["--features", "oidn"], "external::oidn_native")

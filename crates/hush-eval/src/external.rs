@@ -137,6 +137,23 @@ pub fn inverse_tonemap(image: &Image, exposure: f32) -> Image {
 /// image after one warm-up. Errors only on bad input (size, channels, NaN/Inf, naming the image) and on a
 /// runner that fails for another reason than a missing package (its output is in the message).
 pub fn run_baseline(baseline: Baseline, inputs: &[Input], python: &Path, repeats: usize) -> Result<Outcome> {
+    run_baseline_with(baseline, inputs, python, repeats, None)
+}
+
+/// [`run_baseline`] of [`Baseline::Oidn`] with other weights than OIDN's built-in ones: a TZA archive (OIDN's
+/// official weights, or a hush model written by `hush export`), which OIDN's runtime loads through its
+/// `weights` filter parameter (`oidnSetSharedFilterData`), as `oidnDenoise -w` does.
+pub fn run_oidn_with_weights(inputs: &[Input], weights: &[u8], python: &Path, repeats: usize) -> Result<Outcome> {
+    run_baseline_with(Baseline::Oidn, inputs, python, repeats, Some(weights))
+}
+
+fn run_baseline_with(
+    baseline: Baseline,
+    inputs: &[Input],
+    python: &Path,
+    repeats: usize,
+    weights: Option<&[u8]>,
+) -> Result<Outcome> {
     for (i, input) in inputs.iter().enumerate() {
         check_input(i, input)?;
     }
@@ -180,7 +197,11 @@ pub fn run_baseline(baseline: Baseline, inputs: &[Input], python: &Path, repeats
         }
         items.push(item);
     }
-    let job = serde_json::json!({ "method": baseline.name(), "repeats": repeats.max(1), "items": items });
+    let mut job = serde_json::json!({ "method": baseline.name(), "repeats": repeats.max(1), "items": items });
+    if let Some(bytes) = weights {
+        write_file(&dir.0.join("weights.tza"), bytes)?;
+        job["weights"] = serde_json::json!("weights.tza");
+    }
     write_file(&dir.0.join("job.json"), serde_json::to_string_pretty(&job).expect("JSON values serialize").as_bytes())?;
     let script = dir.0.join("run_baseline.py");
     write_file(&script, RUNNER.as_bytes())?;

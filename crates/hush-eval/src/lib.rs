@@ -43,7 +43,8 @@ pub mod tradeoff;
 
 pub use error::{Error, Result};
 pub use metrics::{
-    MS_SSIM_MIN_SIDE, Metrics, compare, mae, ms_ssim_tonemapped, mse, psnr, psnr_of_mse, rel_mse, ssim, ssim_tonemapped,
+    MS_SSIM_MIN_SIDE, Metrics, color_shift, compare, mae, ms_ssim_tonemapped, mse, psnr, psnr_of_mse, rel_mse, ssim,
+    ssim_tonemapped,
 };
 pub use plot::{plot_error_vs_time, plot_lines, series_color};
 pub use report::{CONVENTIONS, Figure, FigureImage, FigureKind, NOISY, REFERENCE, Report, Row, SCHEMA, Skipped, Table};

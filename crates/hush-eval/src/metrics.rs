@@ -32,8 +32,32 @@ pub struct Metrics {
     /// Mean LDR-FLIP of the tonemapped images ([`crate::flip::flip`] at its default pixels per degree);
     /// `Option` so that rows written before FLIP existed still read.
     pub flip: Option<f64>,
+    /// Colour cast: the largest relative difference between a channel's image mean in the test image and in
+    /// the reference, on linear HDR (`max_c |mean_c(test) / mean_c(ref) − 1|`; 0.01 is a 1 % shift of one
+    /// channel's brightness). `None` where a reference channel's mean is 0.
+    pub color_shift: Option<f64>,
     /// The exposure both images were tonemapped with (from the reference).
     pub exposure: f32,
+}
+
+/// [`Metrics::color_shift`] of two images of the same size.
+pub fn color_shift(test: &Image, reference: &Image) -> Result<Option<f64>> {
+    check_pair(test, reference)?;
+    let means = |im: &Image| -> Vec<f64> {
+        let mut sum = vec![0.0f64; im.channels];
+        for px in im.data.chunks_exact(im.channels) {
+            for (s, v) in sum.iter_mut().zip(px) {
+                *s += f64::from(*v);
+            }
+        }
+        let n = (im.width * im.height).max(1) as f64;
+        sum.into_iter().map(|s| s / n).collect()
+    };
+    let (t, r) = (means(test), means(reference));
+    if r.iter().any(|m| *m <= 0.0) {
+        return Ok(None);
+    }
+    Ok(Some(t.iter().zip(&r).map(|(t, r)| (t / r - 1.0).abs()).fold(0.0, f64::max)))
 }
 
 /// Computes every metric at once (tonemapping each image once).
@@ -50,6 +74,7 @@ pub fn compare(test: &Image, reference: &Image) -> Result<Metrics> {
         rel_mse: mean_by(test, reference, rel_se),
         ms_ssim: ms_ssim_tonemapped(&t, &r)?,
         flip: Some(crate::flip::flip(&t, &r)?.mean),
+        color_shift: color_shift(test, reference)?,
         exposure,
     })
 }

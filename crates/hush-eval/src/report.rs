@@ -77,6 +77,8 @@ sigma 1.5, valid region, K1 0.01, K2 0.03, data range 1, mean over pixels and ch
 training loss). MS-SSIM: 5 scales with Wang's weights; it is left empty for images with a side below 176 px, \
 which do not fit 5 scales. MAE and MSE are means over pixels and channels in [0, 1] (the thesis's tables used \
 another scale). relMSE is computed on the linear HDR images: mean of (x - ref)^2 / (ref^2 + 0.01). \
+The colour shift (color_shift in JSON) is, on the linear HDR images, the largest relative difference between a \
+channel's image mean and the reference's: max over R, G, B of |mean(x) / mean(ref) - 1|. \
 FLIP is LDR-FLIP (a port of NVIDIA's reference, flip-evaluator 1.7) on the same tonemapped images at 67 \
 pixels per degree, the mean of its error map. Seconds: render seconds are the wall-clock time of rendering the noisy input \
 at its spp, from the dataset's manifest; denoise seconds are the median wall-clock time of warm runs \
@@ -106,6 +108,9 @@ pub struct Row {
     /// Mean LDR-FLIP on the tonemapped images.
     #[serde(default)]
     pub flip: Option<f64>,
+    /// [`Metrics::color_shift`]: the largest relative difference of a channel's mean from the reference's.
+    #[serde(default)]
+    pub color_shift: Option<f64>,
     /// Seconds to render the noisy input at `spp` (the reference's for `reference`), from the manifest.
     #[serde(default)]
     pub render_seconds: Option<f64>,
@@ -131,6 +136,7 @@ impl Row {
             mse: metrics.mse,
             rel_mse: metrics.rel_mse,
             flip: metrics.flip,
+            color_shift: metrics.color_shift,
             render_seconds: None,
             denoise_seconds: None,
             preview: None,
@@ -437,6 +443,7 @@ impl Report {
                     mse: mean(|r| r.mse),
                     rel_mse: mean(|r| r.rel_mse),
                     flip: mean_some(|r| r.flip),
+                    color_shift: mean_some(|r| r.color_shift),
                     render_seconds: mean_some(|r| r.render_seconds),
                     denoise_seconds: mean_some(|r| r.denoise_seconds),
                     preview: None,

@@ -62,6 +62,7 @@ impl EvalRow {
             mse: f64::NAN,
             rel_mse: nan(self.rel_mse),
             flip: None,
+            color_shift: None,
             render_seconds: self.render_seconds,
             denoise_seconds: self.denoise_seconds,
             preview: None,

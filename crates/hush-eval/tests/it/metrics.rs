@@ -1,5 +1,5 @@
 use hush_dataset::{Image, read_rgb};
-use hush_eval::{compare, mae, mse, psnr, psnr_of_mse, rel_mse, ssim, ssim_tonemapped};
+use hush_eval::{color_shift, compare, mae, mse, psnr, psnr_of_mse, rel_mse, ssim, ssim_tonemapped};
 
 use crate::{fixture, shared_reference};
 
@@ -114,4 +114,22 @@ fn ms_ssim_needs_five_scales() {
     let ms = m.ms_ssim.unwrap();
     assert_eq!(Some(ms), direct.unwrap());
     assert!(ms < 1.0 && ms > m.ssim, "noise hurts the finest scale most: MS-SSIM {ms} vs SSIM {}", m.ssim);
+}
+
+/// The colour shift is the largest relative change of a channel's image mean: red 2 % brighter and blue 1 %
+/// darker is 0.02, whatever the noise around the mean; an unchanged image is 0, a black reference channel
+/// has none.
+#[test]
+fn color_shift_is_the_largest_channel_mean_change() {
+    let reference = Image::from_fn(16, 16, 3, |x, y, c| 0.2 + 0.1 * c as f32 + 0.01 * (x + y) as f32);
+    let shifted = Image::from_fn(16, 16, 3, |x, y, c| {
+        let wobble = if (x + y) % 2 == 0 { 0.05 } else { -0.05 };
+        reference.pixel(x, y)[c] * [1.02, 1.0, 0.99][c] + if c == 1 { wobble } else { 0.0 }
+    });
+    let shift = color_shift(&shifted, &reference).unwrap().unwrap();
+    assert!((shift - 0.02).abs() < 1e-6, "{shift}");
+    assert_eq!(color_shift(&reference, &reference).unwrap(), Some(0.0));
+    assert_eq!(compare(&shifted, &reference).unwrap().color_shift, Some(shift));
+    let black = Image::from_fn(16, 16, 3, |_, _, c| if c == 0 { 0.0 } else { 1.0 });
+    assert_eq!(color_shift(&reference, &black).unwrap(), None);
 }

@@ -3,7 +3,17 @@ use hush_eval::{CONVENTIONS, Figure, FigureImage, FigureKind, Metrics, Report, R
 use crate::TempDir;
 
 fn metrics(psnr: f64) -> Metrics {
-    Metrics { psnr, ssim: 0.9, mae: 0.01, mse: 1e-4, rel_mse: 2e-3, ms_ssim: None, flip: None, exposure: 1.0 }
+    Metrics {
+        psnr,
+        ssim: 0.9,
+        mae: 0.01,
+        mse: 1e-4,
+        rel_mse: 2e-3,
+        ms_ssim: None,
+        flip: None,
+        color_shift: None,
+        exposure: 1.0,
+    }
 }
 
 fn row(view: &str, method: &str, spp: u32, psnr: f64, render: Option<f64>, denoise: Option<f64>) -> Row {

@@ -55,7 +55,17 @@ fn a_non_monotone_ladder_gives_the_first_crossing() {
 }
 
 fn row(method: &str, spp: u32, render: f64, denoise: Option<f64>, rel_mse: f64, ssim: f64) -> Row {
-    let m = Metrics { psnr: 30.0, ssim, mae: 0.0, mse: 0.0, rel_mse, ms_ssim: None, flip: None, exposure: 1.0 };
+    let m = Metrics {
+        psnr: 30.0,
+        ssim,
+        mae: 0.0,
+        mse: 0.0,
+        rel_mse,
+        ms_ssim: None,
+        flip: None,
+        color_shift: None,
+        exposure: 1.0,
+    };
     let mut r = Row::new("v", method, spp, &m);
     r.render_seconds = Some(render);
     r.denoise_seconds = denoise;
