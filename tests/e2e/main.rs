@@ -859,3 +859,22 @@ fn noisy_renders_keep_their_own_features() {
     let err = expect_error(&["train", "--resume", s(&clean_run), "--aux", "noisy"]);
     assert!(err.contains("aux: clean in the run, noisy now"), "{err}");
 }
+
+/// `hush denoise` without `--model` runs OIDN's official weights for the inputs it has (built in): a `hush
+/// render` EXR carries albedo and normal layers, so `rt_hdr_alb_nrm`; a color-only EXR gets `rt_hdr`.
+#[test]
+fn denoise_without_a_model_uses_official_oidn_for_its_inputs() {
+    let dir = scratch("default-model");
+    let render = dir.join("box.exr");
+    expect_success(&["render", s(&cbox()), "--spp", "4", "--width", "32", "--height", "32", "--out", s(&render)]);
+    let out = dir.join("denoised.exr");
+    let stderr = expect_success(&["denoise", "--color", s(&render), "--out", s(&out)]);
+    assert!(stderr.contains("model: oidn-2.5.1 rt_hdr_alb_nrm"), "{stderr}");
+    let denoised = hush_dataset::read_rgb(&out).unwrap();
+    assert_eq!((denoised.width, denoised.height, denoised.count_non_finite()), (32, 32, 0));
+
+    let color = dir.join("color.exr");
+    hush_dataset::write_rgb(&color, &hush_dataset::read_rgb(&render).unwrap()).unwrap();
+    let stderr = expect_success(&["denoise", "--color", s(&color), "--out", s(&out)]);
+    assert!(stderr.contains("model: oidn-2.5.1 rt_hdr "), "{stderr}");
+}

@@ -142,9 +142,11 @@ pub struct RenderArgs {
 
 #[derive(Args, Debug)]
 pub struct DenoiseArgs {
-    /// Trained model (.safetensors written by `hush train`).
+    /// Trained model (.safetensors written by `hush train`, or OIDN's .tza weights) [default: OIDN 2.5.1's
+    /// official weights for the features given, built in: rt_hdr_alb_nrm with albedo and normal, rt_hdr_alb,
+    /// or rt_hdr for color only].
     #[arg(long)]
-    pub model: PathBuf,
+    pub model: Option<PathBuf>,
     /// Noisy image: an RGB EXR, or a multi-layer EXR from `hush render` whose layers then
     /// supply the auxiliary inputs.
     #[arg(long)]

@@ -3,8 +3,9 @@
 
 use anyhow::{Context, Result, bail};
 use hush_dataset::{Image, read_exr, read_rgb, write_rgb};
-use hush_net::Feature;
+use hush_net::{Feature, InputFeatures};
 use hush_pipeline::Denoiser;
+use hush_pipeline::official::official_for;
 
 use crate::cli::DenoiseArgs;
 
@@ -14,22 +15,36 @@ fn layer_name(f: Feature) -> &'static str {
 }
 
 pub fn run(args: DenoiseArgs) -> Result<()> {
-    let model = Denoiser::load(&args.model)?;
     let exr = read_exr(&args.color)?;
-    let color = exr.layer("").with_context(|| format!("reading the color of {}", args.color.display()))?;
     let given = |f: Feature| match f {
         Feature::Albedo => &args.albedo,
         Feature::Normal => &args.normal,
         Feature::Diffuse => &args.diffuse,
         Feature::Specular => &args.specular,
     };
+    let (model, model_name) = match &args.model {
+        Some(path) => (Denoiser::load(path)?, path.display().to_string()),
+        None => {
+            // Until a hush model beats OIDN's on held-out scenes (`cargo xtask train-default` measures it),
+            // the default is OIDN's official weights for the features at hand, built in.
+            let has_layer = |f: Feature| exr.channels.keys().any(|k| k.starts_with(&format!("{}.", layer_name(f))));
+            let available: Vec<Feature> = [Feature::Albedo, Feature::Normal]
+                .into_iter()
+                .filter(|&f| given(f).is_some() || has_layer(f))
+                .collect();
+            let features = match available.as_slice() {
+                [Feature::Albedo, Feature::Normal] => vec![Feature::Albedo, Feature::Normal],
+                [Feature::Albedo] => vec![Feature::Albedo],
+                _ => vec![],
+            };
+            let weights = official_for(&InputFeatures { aux: features });
+            eprintln!("model: {} (built in; --model to choose another)", weights.method_name());
+            (Denoiser::official(&weights)?, weights.method_name())
+        }
+    };
+    let color = exr.layer("").with_context(|| format!("reading the color of {}", args.color.display()))?;
     for f in Feature::ALL.into_iter().filter(|f| given(*f).is_some() && !model.features().contains(f)) {
-        eprintln!(
-            "warning: --{} is ignored: model {} takes {}",
-            f.long_name(),
-            args.model.display(),
-            model.info.features
-        );
+        eprintln!("warning: --{} is ignored: model {} takes {}", f.long_name(), model_name, model.info.features);
     }
     let mut aux: Vec<Image> = Vec::new();
     for &f in model.features() {
@@ -41,7 +56,7 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
             }
             None => bail!(
                 "model {} needs --{} (its features are {}); {} has no '{}' layer either",
-                args.model.display(),
+                model_name,
                 f.long_name(),
                 model.info.features,
                 args.color.display(),
