@@ -27,11 +27,12 @@ use crate::util::{
 };
 
 /// The usage of each benchmark.
-const USAGE: [&str; 4] = [
+const USAGE: [&str; 5] = [
     "bench render [--release] [--spp N (every scene)] [--no-mitsuba] [--no-build]",
     "bench dataset [--release] [--size N] [--views N]",
     "bench net [--release]",
     "bench train [--release] [--steps N]",
+    "bench finetune [--release] [--steps N]",
 ];
 
 /// The flags of benchmark `which` (an index into [`USAGE`]) parsed from `args`.
@@ -52,6 +53,7 @@ pub fn run(args: &[String]) -> Result<()> {
         Some("dataset") => dataset(&args[1..]),
         Some("net") => crate::bench_net::net(&args[1..]),
         Some("train") => crate::bench_net::train(&args[1..]),
+        Some("finetune") => crate::bench_finetune::run(&args[1..]),
         _ => Err(format!("usage: cargo xtask {}", USAGE.join("\n       cargo xtask "))),
     }
 }

@@ -4,6 +4,7 @@
 mod args;
 mod baselines;
 mod bench;
+mod bench_finetune;
 mod bench_net;
 mod cuda_check;
 mod demo;
@@ -45,6 +46,9 @@ tasks:
   bench train [--release] [--steps N]
                              steps per second, the loader's share and the seconds until the samples are
                              ready (from the f16 cache when it is intact) of `hush train` (the demo's settings)
+  bench finetune [--release] [--steps N]
+                             held-out PSNR against training seconds on the demo's dataset, from OIDN's weights
+                             and from random weights (OIDN's unet, the same steps), and steps per second
   baselines setup            install OIDN 2.5.1, BM3D, flip-evaluator, scikit-image (PyPI) into target/baselines-venv
   baselines check            run BM3D and OIDN through hush-eval on a Cornell box crop; fail unless both help
   procedural check [--count N] [--seed S] [--ingredients default|basic|...]
