@@ -33,8 +33,10 @@ pub struct Metrics {
     /// `Option` so that rows written before FLIP existed still read.
     pub flip: Option<f64>,
     /// Colour cast: the largest relative difference between a channel's image mean in the test image and in
-    /// the reference, on linear HDR (`max_c |mean_c(test) / mean_c(ref) − 1|`; 0.01 is a 1 % shift of one
-    /// channel's brightness). `None` where a reference channel's mean is 0.
+    /// the reference, on the tonemapped images (`max_c |mean_c(test) / mean_c(ref) − 1|`; 0.01 is a 1 % shift
+    /// of one channel). On tonemapped images, as the eye sees them: on linear HDR the means are dominated by
+    /// the light sources seen directly, whose radiance no denoiser keeps. `None` where a reference channel's
+    /// mean is 0.
     pub color_shift: Option<f64>,
     /// The exposure both images were tonemapped with (from the reference).
     pub exposure: f32,
@@ -74,7 +76,7 @@ pub fn compare(test: &Image, reference: &Image) -> Result<Metrics> {
         rel_mse: mean_by(test, reference, rel_se),
         ms_ssim: ms_ssim_tonemapped(&t, &r)?,
         flip: Some(crate::flip::flip(&t, &r)?.mean),
-        color_shift: color_shift(test, reference)?,
+        color_shift: color_shift(&t, &r)?,
         exposure,
     })
 }

@@ -77,7 +77,7 @@ sigma 1.5, valid region, K1 0.01, K2 0.03, data range 1, mean over pixels and ch
 training loss). MS-SSIM: 5 scales with Wang's weights; it is left empty for images with a side below 176 px, \
 which do not fit 5 scales. MAE and MSE are means over pixels and channels in [0, 1] (the thesis's tables used \
 another scale). relMSE is computed on the linear HDR images: mean of (x - ref)^2 / (ref^2 + 0.01). \
-The colour shift (color_shift in JSON) is, on the linear HDR images, the largest relative difference between a \
+The colour shift (color_shift in JSON) is, on the tonemapped images, the largest relative difference between a \
 channel's image mean and the reference's: max over R, G, B of |mean(x) / mean(ref) - 1|. \
 FLIP is LDR-FLIP (a port of NVIDIA's reference, flip-evaluator 1.7) on the same tonemapped images at 67 \
 pixels per degree, the mean of its error map. Seconds: render seconds are the wall-clock time of rendering the noisy input \
