@@ -22,20 +22,18 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
         Feature::Diffuse => &args.diffuse,
         Feature::Specular => &args.specular,
     };
+    let has_layer = |f: Feature| exr.channels.keys().any(|k| k.starts_with(&format!("{}.", layer_name(f))));
     let (model, model_name) = match &args.model {
         Some(path) => (Denoiser::load(path)?, path.display().to_string()),
         None => {
             // Until a hush model beats OIDN's on held-out scenes (`cargo xtask train-default` measures it),
-            // the default is OIDN's official weights for the features at hand, built in.
-            let has_layer = |f: Feature| exr.channels.keys().any(|k| k.starts_with(&format!("{}.", layer_name(f))));
-            let available: Vec<Feature> = [Feature::Albedo, Feature::Normal]
-                .into_iter()
-                .filter(|&f| given(f).is_some() || has_layer(f))
-                .collect();
-            let features = match available.as_slice() {
-                [Feature::Albedo, Feature::Normal] => vec![Feature::Albedo, Feature::Normal],
-                [Feature::Albedo] => vec![Feature::Albedo],
-                _ => vec![],
+            // the default is OIDN's official weights for the features at hand, built in (OIDN takes a normal
+            // only with an albedo).
+            let has = |f: Feature| given(f).is_some() || has_layer(f);
+            let features = match (has(Feature::Albedo), has(Feature::Normal)) {
+                (true, true) => vec![Feature::Albedo, Feature::Normal],
+                (true, false) => vec![Feature::Albedo],
+                (false, _) => vec![],
             };
             let weights = official_for(&InputFeatures { aux: features });
             eprintln!("model: {} (built in; --model to choose another)", weights.method_name());
@@ -51,9 +49,7 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
         let given = given(f);
         let image = match given {
             Some(path) => read_rgb(path)?,
-            None if exr.channels.keys().any(|k| k.starts_with(&format!("{}.", layer_name(f)))) => {
-                exr.layer(layer_name(f))?
-            }
+            None if has_layer(f) => exr.layer(layer_name(f))?,
             None => bail!(
                 "model {} needs --{} (its features are {}); {} has no '{}' layer either",
                 model_name,
