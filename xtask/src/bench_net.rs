@@ -9,7 +9,7 @@
 //! so that the default thread count can be chosen from the numbers.
 //!
 //! `train`: steps per second and the loader's share of `hush train` in its default configuration (the
-//! demo's settings) on the demo's dataset, rendered first when missing.
+//! narrow U-Net from scratch, `demo::train_command`) on a small Cornell box dataset, rendered first when missing.
 
 use std::path::Path;
 use std::process::Command;
@@ -141,7 +141,7 @@ pub fn net(args: &[String]) -> Result<()> {
     Ok(())
 }
 
-/// The demo's training settings (`xtask/src/demo.rs`), `--steps` of them (default 60).
+/// `demo::train_command`'s from-scratch settings, `--steps` of them (default 60).
 pub fn train(args: &[String]) -> Result<()> {
     let flags = flags(args, 3)?;
     ensure_vulkan()?;
@@ -167,7 +167,7 @@ pub fn train(args: &[String]) -> Result<()> {
     let summary = read_json(&run.join("summary.json"))?;
     let result = serde_json::json!({
         "benchmark": "train",
-        "setting": "the demo's: cbox 128² dataset, features color+albedo+normal, spp 4 and 16, batch 4, 64² crops, \
+        "setting": "a narrow U-Net from scratch: cbox 128² dataset, features color+albedo+normal, spp 4 and 16, batch 4, 64² crops, \
                     unet width 0.25, L_MIX, Adam 1e-3",
         "steps": summary["steps"],
         "seconds": summary["seconds"],

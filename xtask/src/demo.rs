@@ -44,7 +44,8 @@ pub fn render_dataset(hush: &Path, paths: &DemoPaths) -> Result<()> {
     )
 }
 
-/// `hush train` with the demo's settings; `cargo xtask bench train` measures the same.
+/// `hush train` of a narrow U-Net from scratch (width 0.25, lr 1e-3, batch 4, 64² crops; the demo's settings
+/// before it fine-tuned OIDN's weights): what `cargo xtask train-check` trains and `bench train` measures.
 pub fn train_command(hush: &Path, dataset: &Path, run: &Path, steps: u32) -> Command {
     let mut cmd = Command::new(hush);
     cmd.arg("train").arg("--dataset").arg(dataset).arg("--out").arg(run);

@@ -45,7 +45,7 @@ tasks:
                              the machine's GEMM rate, peak memory, for 1 and 2 threads
   bench train [--release] [--steps N]
                              steps per second, the loader's share and the seconds until the samples are
-                             ready (from the f16 cache when it is intact) of `hush train` (the demo's settings)
+                             ready (from the f16 cache when it is intact) of `hush train` (a narrow U-Net from scratch)
   bench finetune [--release] [--steps N]
                              held-out PSNR against training seconds on the demo's dataset, from OIDN's weights
                              and from random weights (OIDN's unet, the same steps), and steps per second

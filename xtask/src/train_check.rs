@@ -21,7 +21,7 @@ const SCENES: [&str; 2] = ["data/scenes/cbox/scene.xml", "data/scenes/veach-mis/
 pub const MIN_GAIN_DB: f64 = 5.0;
 /// The noisy input's samples per pixel that is checked.
 const SPP: u64 = 4;
-/// The training budget, in steps of the demo's settings (batch 4, 64² crops, width 0.25).
+/// The training budget, in steps of `demo::train_command` (from scratch: batch 4, 64² crops, width 0.25).
 const STEPS: u32 = 2000;
 
 pub fn run(args: &[String]) -> Result<()> {
