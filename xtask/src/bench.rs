@@ -28,8 +28,8 @@ use crate::util::{
 
 /// The usage of each benchmark.
 const USAGE: [&str; 5] = [
-    "bench render [--release] [--spp N (every scene)] [--no-mitsuba] [--no-build]",
-    "bench dataset [--release] [--size N] [--views N]",
+    "bench render [--release] [--spp N (every scene)] [--only NAME] [--no-mitsuba] [--no-build]",
+    "bench dataset [--release] [--size N] [--views N] [--procedural N] [--hush PATH]",
     "bench net [--release]",
     "bench train [--release] [--steps N]",
     "bench finetune [--release] [--steps N]",
@@ -37,10 +37,22 @@ const USAGE: [&str; 5] = [
 
 /// The flags of benchmark `which` (an index into [`USAGE`]) parsed from `args`.
 pub fn flags(args: &[String], which: usize) -> Result<Flags> {
-    use Takes::{Nothing, Number};
+    use Takes::{Nothing, Number, Value};
     let known: &[(&str, Takes)] = match which {
-        0 => &[("--release", Nothing), ("--spp", Number), ("--no-mitsuba", Nothing), ("--no-build", Nothing)],
-        1 => &[("--release", Nothing), ("--size", Number), ("--views", Number)],
+        0 => &[
+            ("--release", Nothing),
+            ("--spp", Number),
+            ("--only", Value),
+            ("--no-mitsuba", Nothing),
+            ("--no-build", Nothing),
+        ],
+        1 => &[
+            ("--release", Nothing),
+            ("--size", Number),
+            ("--views", Number),
+            ("--procedural", Number),
+            ("--hush", Value),
+        ],
         2 => &[("--release", Nothing)],
         _ => &[("--release", Nothing), ("--steps", Number)],
     };
@@ -68,9 +80,12 @@ fn ratio(a: &serde_json::Value, b: &serde_json::Value) -> serde_json::Value {
 /// A scene of `bench render`: where it is, and the settings both renderers use.
 struct BenchScene {
     name: &'static str,
-    /// Relative to the repository root, or to `../shared` with `shared`.
+    /// Relative to the repository root, or to `../shared` with `shared`; empty for a procedural scene.
     path: &'static str,
     shared: bool,
+    /// The seed of `hush scene generate --seed N` (default generator options), written under
+    /// `target/bench/scenes/` first, in place of `path`.
+    procedural: Option<u64>,
     width: u32,
     height: u32,
     spp: u32,
@@ -79,11 +94,12 @@ struct BenchScene {
 }
 
 /// The scenes, sized so that hush takes about a minute or less on each under light load on 2 cores.
-const SCENES: [BenchScene; 3] = [
+const SCENES: [BenchScene; 7] = [
     BenchScene {
         name: "cbox",
         path: "data/scenes/cbox/scene.xml",
         shared: false,
+        procedural: None,
         width: 512,
         height: 512,
         spp: 64,
@@ -93,19 +109,62 @@ const SCENES: [BenchScene; 3] = [
         name: "veach-mis",
         path: "scenes/veach-mis/scene.xml",
         shared: true,
+        procedural: None,
         width: 384,
         height: 216,
         spp: 32,
-        note: "12k triangles, rough conductors, three sphere lights from 7.6 to 3040 W/sr/m²",
+        note: "cubes and rectangles (120 triangles), rough conductors, four analytic sphere lights from 7.6 to \
+               3040 W/sr/m²",
     },
     BenchScene {
         name: "living-room",
         path: "scenes/living-room/scene.xml",
         shared: true,
+        procedural: None,
         width: 384,
         height: 216,
         spp: 8,
         note: "143k triangles (BVH-bound), lit only by an environment map",
+    },
+    BenchScene {
+        name: "spheres-sky",
+        path: "data/tests/mitsuba/spheres-sky/scene.xml",
+        shared: false,
+        procedural: None,
+        width: 256,
+        height: 192,
+        spp: 256,
+        note: "four analytic spheres (diffuse, plastic, rough gold, glass) on a rectangle under a constant sky",
+    },
+    BenchScene {
+        name: "procedural-1",
+        path: "",
+        shared: false,
+        procedural: Some(1),
+        width: 256,
+        height: 256,
+        spp: 32,
+        note: "`hush scene generate --seed 1`: a room of boxes, tables, shelves, spheres and cylinders",
+    },
+    BenchScene {
+        name: "procedural-2",
+        path: "",
+        shared: false,
+        procedural: Some(2),
+        width: 256,
+        height: 256,
+        spp: 32,
+        note: "`hush scene generate --seed 2`",
+    },
+    BenchScene {
+        name: "procedural-3",
+        path: "",
+        shared: false,
+        procedural: Some(3),
+        width: 256,
+        height: 256,
+        spp: 32,
+        note: "`hush scene generate --seed 3`",
     },
 ];
 
@@ -127,8 +186,16 @@ fn render(args: &[String]) -> Result<()> {
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
     let load_before = load_average();
     let mut results = Vec::new();
-    for sc in &SCENES {
+    let only = flags.value("--only").map(str::to_string);
+    for sc in SCENES.iter().filter(|sc| only.as_deref().is_none_or(|o| o == sc.name)) {
         let scene = match (sc.shared, mitsuba::shared_dir()) {
+            _ if let Some(seed) = sc.procedural => {
+                let file = dir.join("scenes").join(sc.name).join("scene.xml");
+                spawn(
+                    Command::new(&hush).args(["scene", "generate", "--seed", &seed.to_string(), "--out"]).arg(&file),
+                )?;
+                file
+            }
             (false, _) => project_root().join(sc.path),
             (true, Some(shared)) => shared.join(sc.path),
             (true, None) => {
@@ -276,33 +343,44 @@ fn render(args: &[String]) -> Result<()> {
 
 /// `cargo xtask bench dataset`: perspectives per hour of `hush dataset` in its default configuration (spp
 /// ladder 1..256, features at 64 spp, references at 1024 spp with 2×2 supersampling) on the Cornell box,
-/// `--views` perspectives (default 2: the scene camera and one generated view) at `--size`² (default 128;
+/// or with `--procedural N` on N generated scenes (`hush dataset --procedural N`, seed 0),
+/// `--views` perspectives per scene (default 2: the scene camera and one generated view) at `--size`² (default 128;
 /// the cost per perspective grows with the pixel count, so the figure at 512² is reported as an
 /// extrapolation). Wall seconds include scene loading and GPU set-up; the render seconds come from the
-/// manifest.
+/// manifest. `--hush PATH` runs another build (an earlier commit's) with the same settings. Written to
+/// `target/bench/dataset-cbox.json` or `dataset-procedural.json`.
 fn dataset(args: &[String]) -> Result<()> {
     let flags = flags(args, 1)?;
     ensure_vulkan()?;
-    let hush = build_hush(flags.has("--release"))?;
+    // Another build of hush (an earlier commit's, to compare with) runs with the same settings.
+    let hush = match flags.value("--hush") {
+        Some(path) => std::path::PathBuf::from(path),
+        None => build_hush(flags.has("--release"))?,
+    };
     let (size, views): (u32, u32) = (flags.number("--size", 128)?, flags.number("--views", 2)?);
+    let procedural: u32 = flags.number("--procedural", 0)?;
     let dir = target_dir().join("bench");
-    let out = dir.join("dataset-cbox");
+    let name = if procedural > 0 { "procedural" } else { "cbox" };
+    let out = dir.join(format!("dataset-{name}"));
     let _ = std::fs::remove_dir_all(&out);
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
-    let scene = project_root().join("data/scenes/cbox/scene.xml");
     let load_before = load_average();
     let start = std::time::Instant::now();
-    spawn(Command::new(&hush).arg("dataset").arg(&scene).arg("--out").arg(&out).args([
-        "--views",
-        &views.to_string(),
-        "--size",
-        &size.to_string(),
-    ]))?;
+    let mut cmd = Command::new(&hush);
+    cmd.arg("dataset");
+    if procedural > 0 {
+        // Seeded scenes (seed 0), generated by the same build that renders them.
+        cmd.args(["--procedural", &procedural.to_string()]);
+    } else {
+        cmd.arg(project_root().join("data/scenes/cbox/scene.xml"));
+    }
+    spawn(cmd.arg("--out").arg(&out).args(["--views", &views.to_string(), "--size", &size.to_string()]))?;
     let wall = start.elapsed().as_secs_f64();
     let manifest = read_json(&out.join("manifest.json"))?;
     let recorded = manifest["views"].as_array().map_or(0, Vec::len);
-    if recorded != views as usize {
-        return Err(format!("{}: {recorded} views recorded, {views} expected", out.display()));
+    let perspectives = views as usize * if procedural > 0 { procedural as usize } else { 1 };
+    if recorded != perspectives {
+        return Err(format!("{}: {recorded} views recorded, {perspectives} expected", out.display()));
     }
     let mut render_seconds = 0.0;
     for v in manifest["views"].as_array().into_iter().flatten() {
@@ -311,14 +389,20 @@ fn dataset(args: &[String]) -> Result<()> {
             + v["aux"]["render_seconds"].as_f64().unwrap_or(0.0)
             + v["reference"]["render_seconds"].as_f64().unwrap_or(0.0);
     }
-    let per_hour = 3600.0 * views as f64 / wall;
+    let per_hour = 3600.0 * perspectives as f64 / wall;
     let scale = (size as f64 * size as f64) / (512.0 * 512.0);
     let result = serde_json::json!({
         "benchmark": "dataset",
-        "scene": "cbox (Mitsuba 3 Cornell box)",
+        "scene": if procedural > 0 {
+            format!("{procedural} procedural scenes (hush dataset --procedural {procedural}, seed 0)")
+        } else {
+            "cbox (Mitsuba 3 Cornell box)".to_string()
+        },
+        "hush": hush.display().to_string(),
         "configuration": manifest["config"],
         "size": size,
         "views": views,
+        "perspectives": perspectives,
         "wall_seconds": wall,
         "render_seconds": render_seconds,
         "perspectives_per_hour": per_hour,
@@ -326,7 +410,7 @@ fn dataset(args: &[String]) -> Result<()> {
         "load_average_before": load_before,
         "load_average_after": load_average(),
     });
-    let path = dir.join("dataset.json");
+    let path = dir.join(format!("dataset-{name}.json"));
     write_json(&path, &result)?;
     println!("{}", serde_json::to_string_pretty(&result).expect("serializes"));
     println!("written to {}", path.display());

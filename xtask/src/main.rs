@@ -36,11 +36,13 @@ tasks:
                              retrain the shipped models (resumable): render the dataset of the bundled and
                              procedural scenes, fine-tune OIDN's weights, evaluate against OIDN on the held-out
                              scenes, write data/models/<name>.safetensors, .tza and the model card .md
-  bench render [--release] [--spp N]
-                             M paths per CPU-second and relMSE × CPU-seconds on the Cornell box
-                             (512², max_depth 8), hush against Mitsuba 3 when it is installed
-  bench dataset [--size N] [--views N]
+  bench render [--release] [--spp N] [--only NAME]
+                             M paths per CPU-second and relMSE × CPU-seconds on the Cornell box, veach-mis,
+                             living-room, spheres under a sky and three procedural rooms (max_depth 8),
+                             hush against Mitsuba 3 when it is installed
+  bench dataset [--size N] [--views N] [--procedural N] [--hush PATH]
                              perspectives per hour of `hush dataset` (default settings) on the Cornell box
+                             or on N procedural scenes, of this build or of the one at PATH
   bench net [--release]      U-Net inference at 512² against official OIDN, a training step's GFLOP/s against
                              the machine's GEMM rate, peak memory, for 1 and 2 threads
   bench train [--release] [--steps N]

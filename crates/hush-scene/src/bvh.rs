@@ -64,19 +64,22 @@ impl Bvh {
     /// Builds the hierarchy over `triangles` (world-space corners). An empty input gives a single
     /// zero node, which must not be traversed.
     pub fn build(triangles: &[[Vec3; 3]]) -> Bvh {
-        let boxes: Vec<Aabb> = triangles
-            .iter()
-            .map(|t| {
-                let mut b = Aabb::EMPTY;
-                t.iter().for_each(|&p| b.grow(p));
-                b
-            })
-            .collect();
+        let bounds: Vec<(Vec3, Vec3)> =
+            triangles.iter().map(|t| (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]))).collect();
         let centroids: Vec<Vec3> = triangles.iter().map(|t| (t[0] + t[1] + t[2]) / 3.0).collect();
-        let mut order: Vec<u32> = (0..triangles.len() as u32).collect();
+        Bvh::build_bounds(&bounds, &centroids)
+    }
+
+    /// Builds the hierarchy over primitives given by their bounds (min, max) and the points
+    /// they are sorted by (a triangle's centroid, a shape's centre), for scenes that mix
+    /// triangles with other primitives; each counts as one triangle in the SAH and the leaf size.
+    pub fn build_bounds(bounds: &[(Vec3, Vec3)], centroids: &[Vec3]) -> Bvh {
+        assert_eq!(bounds.len(), centroids.len(), "one centroid per primitive");
+        let boxes: Vec<Aabb> = bounds.iter().map(|&(min, max)| Aabb { min, max }).collect();
+        let mut order: Vec<u32> = (0..bounds.len() as u32).collect();
         let mut nodes = vec![BvhNode { min: [0.0; 3], first: 0, max: [0.0; 3], count: 0 }];
-        let mut builder = Builder { boxes: &boxes, centroids: &centroids, order: &mut order, nodes: &mut nodes };
-        builder.build(0, 0, triangles.len());
+        let mut builder = Builder { boxes: &boxes, centroids, order: &mut order, nodes: &mut nodes };
+        builder.build(0, 0, bounds.len());
         Bvh { nodes, order }
     }
 

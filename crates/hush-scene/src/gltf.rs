@@ -206,6 +206,7 @@ impl Loader<'_> {
             indices: g.indices,
             material,
             emission,
+            analytic: None,
         });
         Ok(())
     }

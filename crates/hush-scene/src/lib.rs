@@ -37,7 +37,7 @@ mod texture;
 pub use bvh::{Bvh, BvhNode, MAX_LEAF_TRIANGLES};
 pub use error::SceneError;
 pub use model::{
-    Camera, ComplexIor, EnvMap, Environment, Film, Material, Mesh, Microfacet, PixelFilter, Reflectance, Scene,
-    Texture, TextureId,
+    Analytic, Camera, ComplexIor, EnvMap, Environment, Film, Material, Mesh, Microfacet, PixelFilter, Reflectance,
+    Scene, ShapeKind, Texture, TextureId,
 };
 pub use obj::load_obj;

@@ -6,7 +6,7 @@
 //! `conductor`/`roughconductor` (named metals or `eta`/`k`), `dielectric`/`thindielectric`/
 //! `roughdielectric` (named or numeric IORs), `plastic`/`roughplastic`, `twosided`, with
 //! `rgb`/`srgb`/`spectrum`/`float` values and `bitmap` textures; shapes `obj`, `rectangle`,
-//! `cube`, `sphere`, `disk` with `to_world` (`translate`, `rotate`, `scale`, `matrix`,
+//! `cube`, `sphere`, `disk`, `cylinder` (the analytic ones as [`crate::Analytic`]) with `to_world` (`translate`, `rotate`, `scale`, `matrix`,
 //! `lookat`, composed as Mitsuba does: each later element is applied after the earlier ones),
 //! `flip_normals`, `face_normals`, a BSDF by `ref` or inline and an `area` emitter; `constant`
 //! and `envmap` emitters.
@@ -31,8 +31,8 @@ use roxmltree::{Document, Node};
 use crate::shapes;
 use crate::texture::{TextureCache, read_image, srgb_to_linear};
 use crate::{
-    Camera, ComplexIor, EnvMap, Environment, Film, Material, Mesh, Microfacet, PixelFilter, Reflectance, Scene,
-    SceneError, named,
+    Analytic, Camera, ComplexIor, EnvMap, Environment, Film, Material, Mesh, Microfacet, PixelFilter, Reflectance,
+    Scene, SceneError, ShapeKind, named,
 };
 
 impl Scene {
@@ -975,7 +975,7 @@ impl Parser<'_, '_> {
     fn shape(&mut self, node: Node, index: usize) -> Result<ShapeResult, SceneError> {
         let ty = self.attr(node, "type")?;
         let ctx = format!("<shape type=\"{ty}\">");
-        if !matches!(ty.as_str(), "obj" | "rectangle" | "cube" | "sphere" | "disk") {
+        if !matches!(ty.as_str(), "obj" | "rectangle" | "cube" | "sphere" | "disk" | "cylinder") {
             self.warn(node, format!("shape type '{ty}' is not supported yet: the shape is skipped"));
             return Ok(ShapeResult::Skipped);
         }
@@ -986,6 +986,7 @@ impl Parser<'_, '_> {
         let mut to_world = Mat4::IDENTITY;
         let mut center = Vec3::ZERO;
         let mut radius = 1.0f32;
+        let (mut p0, mut p1) = (Vec3::ZERO, Vec3::Z);
         let mut material = None;
         let mut emission = None;
         for child in elements(node) {
@@ -996,12 +997,14 @@ impl Parser<'_, '_> {
                 ("boolean", Some("flip_normals")) => flip_normals = self.boolean(child)?,
                 ("transform", Some("to_world")) => to_world = self.transform(child)?,
                 ("point", Some("center")) if ty == "sphere" => center = self.xyz(child, 0.0)?,
-                ("float", Some("radius")) if ty == "sphere" => {
+                ("float", Some("radius")) if ty == "sphere" || ty == "cylinder" => {
                     radius = self.float(child)?;
-                    if radius <= 0.0 {
-                        return Err(self.err(child, format!("sphere radius {radius} must be positive")));
+                    if !(radius > 0.0 && radius.is_finite()) {
+                        return Err(self.err(child, format!("{ty} radius {radius} must be positive")));
                     }
                 }
+                ("point", Some("p0")) if ty == "cylinder" => p0 = self.xyz(child, 0.0)?,
+                ("point", Some("p1")) if ty == "cylinder" => p1 = self.xyz(child, 0.0)?,
                 ("ref", _) => material = Some(self.bsdf_ref(child)?),
                 ("bsdf", _) => material = Some(self.bsdf(child)?),
                 ("emitter", _) => emission = self.area_emitter(child)?,
@@ -1013,11 +1016,65 @@ impl Parser<'_, '_> {
             (None, Some(f)) => f.clone(),
             (None, None) => format!("{ty} #{index}"),
         };
+        // An analytic shape's object space, placed as Mitsuba places it: a sphere's centre and radius,
+        // a cylinder's end points and radius come before `to_world`.
+        let kind = match ty.as_str() {
+            "sphere" => Some(ShapeKind::Sphere),
+            "disk" => Some(ShapeKind::Disk),
+            "rectangle" => Some(ShapeKind::Rectangle),
+            "cylinder" => Some(ShapeKind::Cylinder),
+            _ => None,
+        };
+        let placement = match ty.as_str() {
+            "sphere" => to_world * Mat4::from_translation(center) * Mat4::from_scale(Vec3::splat(radius)),
+            "cylinder" => {
+                let axis = p1 - p0;
+                let length = axis.length();
+                if !(length > 0.0 && length.is_finite()) {
+                    return Err(self.err(node, format!("cylinder '{name}': p0 and p1 coincide")));
+                }
+                let (s, t) = shapes::coordinate_system(axis / length);
+                let frame = Mat4::from_cols(s.extend(0.0), t.extend(0.0), (axis / length).extend(0.0), Vec4::W);
+                to_world * Mat4::from_translation(p0) * frame * Mat4::from_scale(Vec3::new(radius, radius, length))
+            }
+            _ => to_world,
+        };
+        // Mitsuba turns a sphere or cylinder whose placement mirrors inside out.
+        let mirrors = glam::Mat3::from_mat4(placement).determinant() < 0.0;
+        let flip = flip_normals ^ (mirrors && matches!(ty.as_str(), "sphere" | "cylinder"));
+        let analytic = kind.filter(|&k| Analytic::placement_is_exact(k, &placement)).map(|kind| Analytic {
+            kind,
+            to_world: placement,
+            flip_normals: flip,
+        });
+        if let Some(kind) = kind
+            && analytic.is_none()
+            && glam::Mat3::from_mat4(placement).determinant() != 0.0
+        {
+            self.warn(
+                node,
+                format!(
+                    "shape '{name}': its to_world {} so the {} is tessellated (exact only for {})",
+                    if kind == ShapeKind::Sphere {
+                        "scales unevenly or shears"
+                    } else {
+                        "scales x and y unevenly or shears"
+                    },
+                    kind.name(),
+                    if kind == ShapeKind::Sphere {
+                        "a similarity"
+                    } else {
+                        "the same scale on x and y, z perpendicular"
+                    },
+                ),
+            );
+        }
         let mut geometry = match ty.as_str() {
             "rectangle" => shapes::rectangle(),
             "cube" => shapes::cube(),
             "disk" => shapes::disk(),
-            "sphere" => shapes::sphere(center, radius),
+            "sphere" => shapes::sphere(Vec3::ZERO, 1.0),
+            "cylinder" => shapes::cylinder(),
             _ => {
                 let filename =
                     filename.ok_or_else(|| self.err(node, "an obj shape needs <string name=\"filename\">"))?;
@@ -1044,8 +1101,8 @@ impl Parser<'_, '_> {
                 g
             }
         };
-        geometry.transform(&to_world, ty != "obj");
-        if flip_normals {
+        geometry.transform(&placement, ty != "obj");
+        if flip {
             geometry.flip();
         }
         let dropped = geometry.check().map_err(|m| self.err(node, format!("shape '{name}': {m}")))?;
@@ -1070,6 +1127,7 @@ impl Parser<'_, '_> {
             indices: geometry.indices,
             material: material.unwrap_or(Material::DEFAULT),
             emission,
+            analytic,
         })))
     }
 

@@ -260,7 +260,120 @@ pub struct EnvMap {
     pub to_world: Mat4,
 }
 
-/// A triangle mesh in world space with one material.
+/// The object-space form of one of Mitsuba's analytic shapes (see [`Analytic`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ShapeKind {
+    /// The unit sphere about the origin, facing outwards (Mitsuba's `sphere`, its `center` and
+    /// `radius` folded into `to_world`).
+    Sphere,
+    /// The unit disk in the z = 0 plane, facing +z (`disk`).
+    Disk,
+    /// The square [-1, 1]² in the z = 0 plane, facing +z (`rectangle`).
+    Rectangle,
+    /// The open tube of radius 1 about the z axis from z = 0 to z = 1, facing outwards, without
+    /// caps (`cylinder`, its `p0`, `p1` and `radius` folded into `to_world`).
+    Cylinder,
+}
+
+impl ShapeKind {
+    /// Mitsuba's plugin name.
+    pub fn name(self) -> &'static str {
+        match self {
+            ShapeKind::Sphere => "sphere",
+            ShapeKind::Disk => "disk",
+            ShapeKind::Rectangle => "rectangle",
+            ShapeKind::Cylinder => "cylinder",
+        }
+    }
+}
+
+/// A shape the path tracer intersects exactly, with exact normals, texture coordinates, area and
+/// light sampling, as Mitsuba does: its [`ShapeKind`] placed by `to_world`.
+///
+/// Only placements that keep the shape what its sampling assumes are analytic: a similarity for a
+/// sphere (no shear, the same scale on every axis), the same scale on x and y with z
+/// perpendicular to them for a cylinder; any affine map of a disk or rectangle. A loader
+/// tessellates the others (an ellipsoid is a mesh), with a warning.
+///
+/// Texture coordinates follow Mitsuba: a sphere's are (φ / 2π, θ / π) about its local z axis, a
+/// disk's (r, φ / 2π), a rectangle's ((x + 1) / 2, (y + 1) / 2), a cylinder's (φ / 2π, z).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Analytic {
+    pub kind: ShapeKind,
+    /// From the shape's object space to the world.
+    pub to_world: Mat4,
+    /// The front (where one-sided BSDFs and emitters act) is the side opposite to the normal the
+    /// object-space form has: Mitsuba's `flip_normals`, toggled for a sphere or cylinder whose
+    /// `to_world` mirrors (as Mitsuba toggles it).
+    pub flip_normals: bool,
+}
+
+impl Analytic {
+    /// Whether `to_world` keeps `kind` analytic (see [`Analytic`]): a relative tolerance of 1e-4
+    /// on lengths and angles.
+    pub fn placement_is_exact(kind: ShapeKind, to_world: &Mat4) -> bool {
+        let m = glam::Mat3::from_mat4(*to_world);
+        if !m.is_finite() || m.determinant() == 0.0 {
+            return false;
+        }
+        let (x, y, z) = (m.x_axis, m.y_axis, m.z_axis);
+        let same = |a: f32, b: f32| (a - b).abs() <= 1e-4 * a.max(b);
+        let perpendicular = |a: Vec3, b: Vec3| a.dot(b).abs() <= 1e-4 * a.length() * b.length();
+        match kind {
+            ShapeKind::Disk | ShapeKind::Rectangle => true,
+            ShapeKind::Cylinder => {
+                same(x.length(), y.length()) && perpendicular(x, y) && perpendicular(x, z) && perpendicular(y, z)
+            }
+            ShapeKind::Sphere => {
+                same(x.length(), y.length())
+                    && same(x.length(), z.length())
+                    && perpendicular(x, y)
+                    && perpendicular(x, z)
+                    && perpendicular(y, z)
+            }
+        }
+    }
+
+    /// The sphere's centre and radius in the world (meaningful for a sphere only).
+    pub fn sphere(&self) -> (Vec3, f32) {
+        (self.to_world.transform_point3(Vec3::ZERO), self.to_world.transform_vector3(Vec3::X).length())
+    }
+
+    /// The exact surface area in the world.
+    pub fn area(&self) -> f64 {
+        let m = &self.to_world;
+        let (x, y, z) = (m.transform_vector3(Vec3::X), m.transform_vector3(Vec3::Y), m.transform_vector3(Vec3::Z));
+        let cross = x.as_dvec3().cross(y.as_dvec3()).length();
+        match self.kind {
+            ShapeKind::Sphere => 4.0 * std::f64::consts::PI * (x.length() as f64).powi(2),
+            ShapeKind::Disk => std::f64::consts::PI * cross,
+            ShapeKind::Rectangle => 4.0 * cross,
+            ShapeKind::Cylinder => std::f64::consts::TAU * x.length() as f64 * z.length() as f64,
+        }
+    }
+
+    /// Axis-aligned world bounds (min, max): exact for a sphere, the box of the transformed
+    /// object-space bounds otherwise.
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        if self.kind == ShapeKind::Sphere {
+            let (c, r) = self.sphere();
+            return (c - Vec3::splat(r), c + Vec3::splat(r));
+        }
+        let (z0, z1) = if self.kind == ShapeKind::Cylinder { (0.0, 1.0) } else { (0.0, 0.0) };
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        for corner in 0..8 {
+            let x = if corner & 1 == 0 { -1.0 } else { 1.0 };
+            let y = if corner & 2 == 0 { -1.0 } else { 1.0 };
+            let z = if corner & 4 == 0 { z0 } else { z1 };
+            let p = self.to_world.transform_point3(Vec3::new(x, y, z));
+            lo = lo.min(p);
+            hi = hi.max(p);
+        }
+        (lo, hi)
+    }
+}
+
+/// A triangle mesh in world space with one material, or one of Mitsuba's analytic shapes.
 ///
 /// The front of a triangle is the side its counter-clockwise winding faces
 /// (`(p1 - p0) × (p2 - p0)`); one-sided BSDFs and emitters act only there.
@@ -276,6 +389,10 @@ pub struct Mesh {
     pub material: Material,
     /// Radiance emitted from the front side, if the mesh is an area light.
     pub emission: Option<Vec3>,
+    /// The exact shape, when the mesh is one of Mitsuba's analytic shapes: the path tracer
+    /// intersects and samples that, and the triangles above are its tessellation (bounds and
+    /// whatever else needs triangles), facing the same way.
+    pub analytic: Option<Analytic>,
 }
 
 impl Mesh {
@@ -343,9 +460,19 @@ impl Scene {
         }
     }
 
-    /// Number of triangles over all meshes.
+    /// Number of triangles over all meshes (analytic shapes count their tessellation).
     pub fn triangle_count(&self) -> usize {
         self.meshes.iter().map(|m| m.indices.len()).sum()
+    }
+
+    /// Number of triangles of the meshes that are not analytic shapes: those the tracer intersects.
+    pub fn mesh_triangle_count(&self) -> usize {
+        self.meshes.iter().filter(|m| m.analytic.is_none()).map(|m| m.indices.len()).sum()
+    }
+
+    /// Number of analytic shapes.
+    pub fn analytic_count(&self) -> usize {
+        self.meshes.iter().filter(|m| m.analytic.is_some()).count()
     }
 
     /// Axis-aligned bounds of all geometry (min, max).

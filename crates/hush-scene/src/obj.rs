@@ -115,6 +115,7 @@ pub fn load_obj(path: &Path, material: Material) -> Result<Mesh, SceneError> {
         indices: geometry.indices,
         material,
         emission: None,
+        analytic: None,
     })
 }
 
@@ -167,6 +168,7 @@ pub(crate) fn load_obj_scene(path: &Path) -> Result<Scene, SceneError> {
             indices: g.indices,
             material,
             emission,
+            analytic: None,
         });
     }
     if meshes.is_empty() {

@@ -3,8 +3,8 @@
 //! borrowed from other scenes), random materials and random lights, written as Mitsuba 3 XML
 //! that [`Scene::load`](crate::Scene::load) reads back without a warning.
 //!
-//! [`generate`] is pure: it returns the XML text and the assets the XML names (a cylinder OBJ,
-//! texture and environment PNGs), to be written next to the scene file by the caller. The
+//! [`generate`] is pure: it returns the XML text and the assets the XML names (texture and
+//! environment PNGs), to be written next to the scene file by the caller. The
 //! same seed and options give byte-identical output on every platform: every number comes from
 //! a SplitMix64 stream through IEEE-exact f32 arithmetic (no transcendental function reaches the
 //! XML; rotations are written as angles for the loader) and is printed rounded.
@@ -25,7 +25,7 @@ use glam::Vec3;
 use hush_hash::SplitMix64;
 
 /// Bumped whenever the same seed and options would give a different scene.
-pub const GENERATOR_VERSION: u32 = 2;
+pub const GENERATOR_VERSION: u32 = 3;
 
 /// What the generator may put into a scene beyond what hush's kernel renders today.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -329,7 +329,6 @@ struct Gen<'a> {
     footprints: Vec<Footprint>,
     materials: usize,
     environment: Option<String>,
-    cylinder: bool,
     borrowable: Vec<(PathBuf, Vec3, Vec3)>,
 }
 
@@ -365,7 +364,6 @@ impl<'a> Gen<'a> {
             footprints: Vec::new(),
             materials: 0,
             environment: None,
-            cylinder: false,
             borrowable: options.borrow_meshes.as_deref().map(borrowable_meshes).unwrap_or_default(),
         }
     }
@@ -432,10 +430,7 @@ impl<'a> Gen<'a> {
         self.body = head;
     }
 
-    fn finish(mut self) -> GeneratedScene {
-        if self.cylinder {
-            self.assets.push(Asset { file: "cylinder.obj".into(), bytes: cylinder_obj(32).into_bytes() });
-        }
+    fn finish(self) -> GeneratedScene {
         GeneratedScene {
             seed: self.seed,
             style: self.style.name(),
@@ -872,10 +867,15 @@ impl<'a> Gen<'a> {
         self.cylinder_shape("cylinder", &t, &m);
     }
 
+    /// A closed unit cylinder (radius 1, y from 0 to 1) placed by `transform`: Mitsuba's open
+    /// `cylinder` and a `disk` at each end, facing out, all analytic.
     fn cylinder_shape(&mut self, name: &str, transform: &str, bsdf: &Bsdf) {
-        self.cylinder = true;
-        let extra = "<string name=\"filename\" value=\"cylinder.obj\"/>";
-        self.shape("obj", name, transform, bsdf, extra, None);
+        let extra = "<point name=\"p0\" value=\"0, 0, 0\"/><point name=\"p1\" value=\"0, 1, 0\"/>";
+        self.shape("cylinder", name, transform, bsdf, extra, None);
+        let bottom = format!("<rotate x=\"1\" angle=\"90\"/>{transform}");
+        self.shape("disk", &format!("{name}-bottom"), &bottom, bsdf, "", None);
+        let top = format!("<rotate x=\"1\" angle=\"-90\"/><translate value=\"0, 1, 0\"/>{transform}");
+        self.shape("disk", &format!("{name}-top"), &top, bsdf, "", None);
     }
 
     fn borrowed(&mut self, glass_bias: f32) {
@@ -949,43 +949,6 @@ fn png(width: u32, height: u32, rgb: Vec<u8>) -> Vec<u8> {
     let mut bytes = std::io::Cursor::new(Vec::new());
     img.write_to(&mut bytes, image::ImageFormat::Png).expect("PNG encoding into memory cannot fail");
     bytes.into_inner()
-}
-
-/// A closed unit cylinder (radius 1, from y = 0 to y = 1) as OBJ text: smooth sides, flat caps.
-fn cylinder_obj(segments: u32) -> String {
-    let mut s = String::from("# unit cylinder: radius 1, y from 0 to 1\n");
-    let ring: Vec<(f64, f64)> = (0..segments)
-        .map(|j| {
-            let phi = std::f64::consts::TAU * j as f64 / segments as f64;
-            (phi.cos(), phi.sin())
-        })
-        .collect();
-    let f = |x: f64| {
-        let t = format!("{x:.6}");
-        if t == "-0.000000" { "0.000000".to_string() } else { t }
-    };
-    // Side: vertices 1..=2n (bottom, top per segment), normals 1..=n.
-    for &(c, sn) in &ring {
-        let _ = writeln!(s, "v {} 0 {}\nv {} 1 {}", f(c), f(sn), f(c), f(sn));
-    }
-    for &(c, sn) in &ring {
-        let _ = writeln!(s, "vn {} 0 {}", f(c), f(sn));
-    }
-    // Caps: centre vertices and ring copies, normals n+1 (down) and n+2 (up).
-    let n = segments;
-    let _ = writeln!(s, "v 0 0 0\nv 0 1 0\nvn 0 -1 0\nvn 0 1 0");
-    let (bottom, top) = (2 * n + 1, 2 * n + 2);
-    for j in 0..n {
-        let k = (j + 1) % n;
-        let (b0, t0, b1, t1) = (2 * j + 1, 2 * j + 2, 2 * k + 1, 2 * k + 2);
-        let (n0, n1) = (j + 1, k + 1);
-        // Outward winding (counter-clockwise seen from outside).
-        let _ = writeln!(s, "f {b0}//{n0} {t0}//{n0} {t1}//{n1}");
-        let _ = writeln!(s, "f {b0}//{n0} {t1}//{n1} {b1}//{n1}");
-        let _ = writeln!(s, "f {bottom}//{} {b0}//{} {b1}//{}", n + 1, n + 1, n + 1);
-        let _ = writeln!(s, "f {top}//{} {t1}//{} {t0}//{}", n + 2, n + 2, n + 2);
-    }
-    s
 }
 
 /// Small OBJ meshes (at most 400 kB) below `dir/*/models/`, with their bounds, sorted by path.

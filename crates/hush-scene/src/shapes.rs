@@ -1,4 +1,5 @@
-//! Mitsuba's analytic shapes tessellated into triangle meshes, transforms applied to meshes,
+//! Mitsuba's analytic shapes tessellated into triangle meshes (the tracer intersects the exact
+//! shapes, [`crate::Analytic`]; a tessellation stands in where a placement has no exact form), transforms applied to meshes,
 //! and the checks every mesh passes before it enters a [`crate::Scene`].
 //!
 //! Object-space definitions follow Mitsuba: `rectangle` is [-1, 1]² in the z = 0 plane facing
@@ -119,6 +120,41 @@ pub(crate) fn sphere(center: Vec3, radius: f32) -> Geometry {
     let normals = unit.iter().map(|d| Vec3::new(d[0] as f32, d[1] as f32, d[2] as f32)).collect();
     let uvs = (0..=m).flat_map(|i| (0..=n).map(move |j| Vec2::new(j as f32 / n as f32, i as f32 / m as f32))).collect();
     Geometry { positions, normals: Some(normals), uvs: Some(uvs), indices }
+}
+
+/// The open unit cylinder (radius 1 about the z axis, z from 0 to 1, no caps) as `SEGMENTS`
+/// quads with smooth outward normals and the analytic area 2π. UVs are Mitsuba's: (φ / 2π, z).
+pub(crate) fn cylinder() -> Geometry {
+    let n = SEGMENTS;
+    let step = std::f64::consts::TAU / n as f64;
+    // The perimeter of the inscribed n-gon is 2n sin(π/n): scale the radius to make it 2π.
+    let r = std::f64::consts::PI / (n as f64 * (step / 2.0).sin());
+    let mut g = Geometry { normals: Some(Vec::new()), uvs: Some(Vec::new()), ..Default::default() };
+    for j in 0..=n {
+        let phi = step * j as f64;
+        let (c, s) = (phi.cos() as f32, phi.sin() as f32);
+        for z in [0.0, 1.0] {
+            g.positions.push(Vec3::new(r as f32 * c, r as f32 * s, z));
+            g.normals.as_mut().unwrap().push(Vec3::new(c, s, 0.0));
+            g.uvs.as_mut().unwrap().push(Vec2::new(j as f32 / n as f32, z));
+        }
+    }
+    for j in 0..n {
+        let (a, b, c, d) = (2 * j, 2 * j + 2, 2 * j + 3, 2 * j + 1);
+        g.indices.push([a, b, c]);
+        g.indices.push([a, c, d]);
+    }
+    g
+}
+
+/// Two unit vectors that complete unit `n` to a right-handed orthonormal frame (s, t, n), as
+/// Mitsuba's `coordinate_system` builds them (Duff et al. 2017), so that a cylinder's `p0`/`p1`
+/// frame and with it its texture coordinates are Mitsuba's.
+pub(crate) fn coordinate_system(n: Vec3) -> (Vec3, Vec3) {
+    let sign = if n.z >= 0.0 { 1.0 } else { -1.0 };
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    (Vec3::new(sign * n.x * n.x * a + 1.0, sign * b, -sign * n.x), Vec3::new(b, n.y * n.y * a + sign, -n.y))
 }
 
 impl Geometry {

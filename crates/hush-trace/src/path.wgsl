@@ -99,8 +99,10 @@ fn rand() -> f32 {
 
 // ---- geometry ----
 
-// A ray's nearest hit: distance, triangle, barycentrics, and of that triangle its material,
-// geometric normal (cross(e1, e2), not normalized) and light-sampling density per unit area.
+// A ray's nearest hit: distance, slot (triangle or shape), barycentrics, and of that slot its
+// material, geometric normal (a triangle's cross(e1, e2), not normalized; a shape's is found after
+// the trace, `shape_surface`), light-sampling density per unit area and shape (NO_SHAPE for a
+// triangle).
 struct Hit {
     t: f32,
     tri: u32,
@@ -109,6 +111,7 @@ struct Hit {
     mat: u32,
     ng: vec3<f32>,
     area_pdf: f32,
+    shape: u32,
 }
 
 // A BVH node (hush_scene::BvhNode): a leaf when count > 0 (triangles first .. first + count),
@@ -130,6 +133,13 @@ fn enter(n: Node, o: vec3<f32>, inv_d: vec3<f32>, t_max: f32) -> f32 {
     let near = max(max(min(t0.x, t1.x), min(t0.y, t1.y)), max(min(t0.z, t1.z), 0.0));
     let far = min(min(max(t0.x, t1.x), max(t0.y, t1.y)), min(max(t0.z, t1.z), t_max));
     return select(T_MAX, near, near <= far);
+}
+
+// The reciprocal of a ray direction for the BVH's slab tests: tiny components are replaced by ±1e-30 so that
+// their reciprocals stay finite.
+fn inverse_direction(d: vec3<f32>) -> vec3<f32> {
+    let tiny = select(vec3<f32>(-1e-30), vec3<f32>(1e-30), d >= vec3<f32>(0.0));
+    return 1.0 / select(d, tiny, abs(d) < vec3<f32>(1e-30));
 }
 
 // Möller–Trumbore; updates `hit` when triangle i (corner p0, edges e1 and e2) is nearer. One
@@ -155,20 +165,26 @@ fn test_triangle_at(i: u32, p0: vec3<f32>, e1: vec3<f32>, e2: vec3<f32>, o: vec3
     return nearer;
 }
 
-// Triangle i of the buffer.
+// Slot i of the buffer: a triangle, or the analytic shape its e2.w names (shapes.wgsl).
 fn test_triangle(i: u32, o: vec3<f32>, d: vec3<f32>, hit: ptr<function, Hit>) {
     let tri = tris[i];
+    let tag = bitcast<u32>(tri.e2.w);
+    if HAS_SHAPES && tag != 0u {
+        test_shape(i, tag - 1u, bitcast<u32>(tri.p0.w), tri.e1.w, o, d, hit);
+        return;
+    }
     if test_triangle_at(i, tri.p0.xyz, tri.e1.xyz, tri.e2.xyz, o, d, hit) {
         (*hit).mat = bitcast<u32>(tri.p0.w);
         (*hit).ng = cross(tri.e1.xyz, tri.e2.xyz);
         (*hit).area_pdf = tri.e1.w;
+        (*hit).shape = NO_SHAPE;
     }
 }
 
 // The nearest hit with t in (0, t_max); with `any`, the BVH walk returns the first hit it finds
 // (the flat scan finds the nearest either way).
 fn trace_ray(o: vec3<f32>, d: vec3<f32>, t_max: f32, any: bool) -> Hit {
-    var hit = Hit(t_max, NO_HIT, 0.0, 0.0, 0u, vec3<f32>(0.0), 0.0);
+    var hit = Hit(t_max, NO_HIT, 0.0, 0.0, 0u, vec3<f32>(0.0), 0.0, NO_SHAPE);
     if params.tri_count == 0u {
         return hit;
     }
@@ -176,9 +192,7 @@ fn trace_ray(o: vec3<f32>, d: vec3<f32>, t_max: f32, any: bool) -> Hit {
         scan_triangles(o, d, &hit);
         return hit;
     }
-    // Tiny direction components are replaced by ±1e-30 so that their reciprocals stay finite.
-    let tiny = select(vec3<f32>(-1e-30), vec3<f32>(1e-30), d >= vec3<f32>(0.0));
-    let inv_d = 1.0 / select(d, tiny, abs(d) < vec3<f32>(1e-30));
+    let inv_d = inverse_direction(d);
     var stack: array<u32, STACK_SIZE>;
     var sp = 0u;
     var node = 0u;
@@ -260,13 +274,15 @@ fn power_heuristic(a: f32, b: f32) -> f32 {
     return a2 / (a2 + b * b);
 }
 
-// A triangle light: corner, edges, density per unit area of picking a point on it, emitted radiance.
+// A light slot: a triangle's corner and edges, the density per unit area of picking a point on
+// it, its emitted radiance, and the analytic shape it is (NO_SHAPE for a triangle).
 struct LightTri {
     p0: vec3<f32>,
     e1: vec3<f32>,
     e2: vec3<f32>,
     area_pdf: f32,
     emission: vec3<f32>,
+    shape: u32,
 }
 
 struct Sample {
@@ -384,7 +400,7 @@ fn bounce(st: ptr<function, PathState>) -> bool {
     let prev_pdf = (*st).prev_pdf;
     let prev_delta = (*st).prev_delta;
     let depth = (*st).depth;
-    let hit = intersect(o, d, T_MAX);
+    var hit = intersect(o, d, T_MAX);
     if hit.tri == NO_HIT {
         // The environment, weighted against sampling it.
         if HAS_ENV && env.kind != ENV_NONE {
@@ -397,11 +413,19 @@ fn bounce(st: ptr<function, PathState>) -> bool {
         return false;
     }
     let p = o + d * hit.t;
+    // An analytic shape's exact normal (its shading normal too) and texture coordinates.
+    let on_shape = HAS_SHAPES && hit.shape != NO_SHAPE;
+    var uv = vec2<f32>(0.0);
+    if on_shape {
+        let surface = shape_surface(hit.shape, p);
+        hit.ng = surface.n;
+        uv = surface.uv;
+    }
     let ng = normalize(hit.ng);
     let front = dot(ng, d) < 0.0;
     var ns = ng;
     var mat = material(hit.mat);
-    if HAS_SHADING_NORMALS || HAS_TEXTURES {
+    if (HAS_SHADING_NORMALS || HAS_TEXTURES) && !on_shape {
         let nr = normals[hit.tri];
         let w = 1.0 - hit.u - hit.v;
         if nr.n0.w > 0.5 {
@@ -411,11 +435,11 @@ fn bounce(st: ptr<function, PathState>) -> bool {
                 ns = -ns;
             }
         }
-        let tex = bitcast<u32>(mat.e.x);
-        if HAS_TEXTURES && tex != NO_TEXTURE {
-            let uv = w * nr.uv01.xy + hit.u * nr.uv01.zw + hit.v * nr.uv2.xy;
-            mat.a = vec4<f32>(texture_lookup(tex, uv), mat.a.w);
-        }
+        uv = w * nr.uv01.xy + hit.u * nr.uv01.zw + hit.v * nr.uv2.xy;
+    }
+    let tex = bitcast<u32>(mat.e.x);
+    if HAS_TEXTURES && tex != NO_TEXTURE {
+        mat.a = vec4<f32>(texture_lookup(tex, uv), mat.a.w);
     }
     let delta = mat_is_delta(mat);
 
@@ -432,8 +456,11 @@ fn bounce(st: ptr<function, PathState>) -> bool {
     if mat.emission.w > 0.5 && front {
         var weight = 1.0;
         if !prev_delta {
-            let light_pdf = (1.0 - env.radiance.w) * hit.area_pdf * hit.t * hit.t / dot(ng, -d);
-            weight = power_heuristic(prev_pdf, light_pdf);
+            var light_pdf = hit.area_pdf * hit.t * hit.t / dot(ng, -d);
+            if on_shape {
+                light_pdf = shape_light_pdf(hit.shape, hit.area_pdf, o, d, hit.t, ng);
+            }
+            weight = power_heuristic(prev_pdf, (1.0 - env.radiance.w) * light_pdf);
         }
         (*st).out.radiance += throughput * mat.emission.xyz * weight;
     }
@@ -465,19 +492,32 @@ fn bounce(st: ptr<function, PathState>) -> bool {
             let lt = light_triangle(rand());
             var a = rand();
             var b = rand();
-            if a + b > 1.0 {
-                a = 1.0 - a;
-                b = 1.0 - b;
+            var lng = vec3<f32>(0.0);
+            let on_light_shape = HAS_SHAPES && lt.shape != NO_SHAPE;
+            if on_light_shape {
+                let ls = shape_light_sample(lt.shape, p, vec2<f32>(a, b));
+                lp = ls.q;
+                lng = ls.n;
+            } else {
+                if a + b > 1.0 {
+                    a = 1.0 - a;
+                    b = 1.0 - b;
+                }
+                lp = lt.p0 + a * lt.e1 + b * lt.e2;
+                lng = normalize(cross(lt.e1, lt.e2));
             }
-            lp = lt.p0 + a * lt.e1 + b * lt.e2;
             to_env = false;
-            let lng = normalize(cross(lt.e1, lt.e2));
             let to_light = lp - p;
             let dist2 = dot(to_light, to_light);
-            wi = to_light / sqrt(dist2);
+            let dist = sqrt(dist2);
+            wi = to_light / dist;
             let cos_light = dot(lng, -wi);
             if cos_light > 0.0 {
-                light_pdf = (1.0 - env_pick) * lt.area_pdf * dist2 / cos_light;
+                var pdf = lt.area_pdf * dist2 / cos_light;
+                if on_light_shape {
+                    pdf = shape_light_pdf(lt.shape, lt.area_pdf, p, wi, dist, lng);
+                }
+                light_pdf = (1.0 - env_pick) * pdf;
                 radiance = lt.emission;
             }
         }

@@ -8,7 +8,7 @@ use hush_scene::{PixelFilter, Scene};
 use wgpu::util::DeviceExt;
 
 use crate::scan::{SceneLiterals, scene_source};
-use crate::upload::{GpuLight, GpuMaterial, GpuNode, GpuNormals, GpuTri, KernelFeatures, flatten};
+use crate::upload::{GpuLight, GpuMaterial, GpuNode, GpuNormals, GpuShape, GpuTri, KernelFeatures, flatten};
 use crate::{GpuContext, TraceError};
 
 /// The WGSL source of the generic path-tracing kernel (validated by a test with naga).
@@ -16,6 +16,7 @@ pub const KERNEL_SOURCE: &str = concat!(
     include_str!("bsdf.wgsl"),
     include_str!("env.wgsl"),
     include_str!("path.wgsl"),
+    include_str!("shapes.wgsl"),
     include_str!("scene_scan.wgsl"),
     include_str!("scene_material.wgsl"),
     include_str!("scene_light.wgsl"),
@@ -23,7 +24,12 @@ pub const KERNEL_SOURCE: &str = concat!(
 
 /// The kernel without its access to the scene (`scene_*.wgsl`), which a kernel specialized to a
 /// scene replaces (`scan.rs`).
-const KERNEL_BODY: &str = concat!(include_str!("bsdf.wgsl"), include_str!("env.wgsl"), include_str!("path.wgsl"));
+const KERNEL_BODY: &str = concat!(
+    include_str!("bsdf.wgsl"),
+    include_str!("env.wgsl"),
+    include_str!("path.wgsl"),
+    include_str!("shapes.wgsl")
+);
 
 /// The WGSL source the renderer compiles for `scene`: the generic source, or with `generic` false,
 /// the source with what of the scene is small enough written in as literals (see `scan.rs`).
@@ -172,6 +178,7 @@ impl<'a> Renderer<'a> {
                 buffer(6, read),
                 buffer(7, read),
                 buffer(8, uniform),
+                buffer(9, read),
             ],
         });
         let layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -209,6 +216,7 @@ impl<'a> Renderer<'a> {
             ("HAS_ROUGH_PLASTIC", flag(features.rough_plastic)),
             ("HAS_BECKMANN", flag(features.beckmann)),
             ("FLAT_SCAN", flag(features.flat_scan)),
+            ("HAS_SHAPES", flag(features.shapes)),
             ("HAS_SHADING_NORMALS", flag(features.shading_normals)),
             ("HAS_WIDE_FILTER", flag(features.wide_filter)),
         ];
@@ -297,7 +305,7 @@ impl<'a> Renderer<'a> {
             // Empty storage buffers are not allowed: bind one zeroed element instead.
             let padded;
             let contents = if bytes.is_empty() {
-                padded = vec![0u8; 64];
+                padded = vec![0u8; 256];
                 &padded[..]
             } else {
                 bytes
@@ -313,6 +321,7 @@ impl<'a> Renderer<'a> {
         let materials = storage("materials", bytemuck::cast_slice::<GpuMaterial, u8>(&flat.materials));
         let lights = storage("lights", bytemuck::cast_slice::<GpuLight, u8>(&flat.lights));
         let nodes = storage("bvh", bytemuck::cast_slice::<GpuNode, u8>(&flat.nodes));
+        let shapes = storage("shapes", bytemuck::cast_slice::<GpuShape, u8>(&flat.shapes));
         let aux_bytes = flat.aux.len() as u64 * 4;
         if aux_bytes > limit {
             return Err(TraceError::Invalid(format!(
@@ -362,6 +371,7 @@ impl<'a> Renderer<'a> {
                 wgpu::BindGroupEntry { binding: 6, resource: nodes.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 7, resource: aux.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 8, resource: env.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 9, resource: shapes.as_entire_binding() },
             ],
         });
 

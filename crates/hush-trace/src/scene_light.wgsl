@@ -14,10 +14,11 @@ fn pick_light(u: f32) -> u32 {
     return lo;
 }
 
-// The triangle light picked by power with u in [0, 1), from the buffers. A kernel specialized
+// The light slot (a triangle or a shape) picked by power with u in [0, 1), from the buffers. A kernel specialized
 // to a scene with few light triangles holds them as literals instead (see `scan.rs`).
 fn light_triangle(u: f32) -> LightTri {
     let t = tris[lights[pick_light(u)].tri];
     let emission = materials[bitcast<u32>(t.p0.w)].emission.xyz;
-    return LightTri(t.p0.xyz, t.e1.xyz, t.e2.xyz, t.e1.w, emission);
+    // A triangle's tag is 0, so its shape is 0 − 1 = NO_SHAPE.
+    return LightTri(t.p0.xyz, t.e1.xyz, t.e2.xyz, t.e1.w, emission, bitcast<u32>(t.e2.w) - 1u);
 }

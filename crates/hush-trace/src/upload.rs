@@ -17,6 +17,47 @@ pub(crate) struct GpuTri {
     pub e2: [f32; 4],
 }
 
+/// An analytic shape for the kernel (mirrors `Shape` in shapes.wgsl): the rows of its world-to-object
+/// and object-to-world affine maps, then kind, flip, area and (a sphere's) radius.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub(crate) struct GpuShape {
+    pub to_local: [[f32; 4]; 3],
+    pub to_world: [[f32; 4]; 3],
+    pub info: [f32; 4],
+}
+
+// Shape kinds; mirror SHAPE_* in shapes.wgsl.
+pub(crate) const SHAPE_SPHERE: u32 = 0;
+const SHAPE_DISK: u32 = 1;
+const SHAPE_RECTANGLE: u32 = 2;
+const SHAPE_CYLINDER: u32 = 3;
+
+impl GpuShape {
+    fn new(a: &hush_scene::Analytic) -> GpuShape {
+        use hush_scene::ShapeKind;
+        let rows = |m: glam::Mat4| {
+            let r = m.transpose();
+            [r.x_axis.to_array(), r.y_axis.to_array(), r.z_axis.to_array()]
+        };
+        let kind = match a.kind {
+            ShapeKind::Sphere => SHAPE_SPHERE,
+            ShapeKind::Disk => SHAPE_DISK,
+            ShapeKind::Rectangle => SHAPE_RECTANGLE,
+            ShapeKind::Cylinder => SHAPE_CYLINDER,
+        };
+        GpuShape {
+            to_local: rows(a.to_world.inverse()),
+            to_world: rows(a.to_world),
+            info: [f32::from_bits(kind), f32::from_bits(a.flip_normals as u32), a.area() as f32, a.sphere().1],
+        }
+    }
+
+    pub fn kind(&self) -> u32 {
+        self.info[0].to_bits()
+    }
+}
+
 /// Shading normals (`w` = 1 when interpolated) and texture coordinates of a triangle's corners.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -361,7 +402,10 @@ const STACK_SIZE: usize = 64;
 
 pub(crate) struct GpuScene {
     pub nodes: Vec<GpuNode>,
+    /// Triangles and, in slots of their own, analytic shapes (`e2.w` holds the bits of the shape's
+    /// index + 1; 0 for a triangle), in the BVH's leaf order.
     pub tris: Vec<GpuTri>,
+    pub shapes: Vec<GpuShape>,
     pub normals: Vec<GpuNormals>,
     pub materials: Vec<GpuMaterial>,
     pub lights: Vec<GpuLight>,
@@ -378,8 +422,11 @@ pub struct KernelFeatures {
     pub rough_dielectric: bool,
     pub rough_plastic: bool,
     pub beckmann: bool,
-    /// Few enough triangles ([`FLAT_SCAN_MAX_TRIANGLES`]) that rays test them all instead of walking the BVH.
+    /// Few enough triangles and shapes ([`FLAT_SCAN_MAX_TRIANGLES`], a shape counting as
+    /// [`FLAT_SCAN_SHAPE_COST`]) that rays test them all instead of walking the BVH.
     pub flat_scan: bool,
+    /// Some mesh is an analytic shape.
+    pub shapes: bool,
     /// Some mesh has vertex normals (interpolated shading normals).
     pub shading_normals: bool,
     /// The film's pixel filter is a tent or a gaussian (sampled in a loop; the box is one draw).
@@ -397,6 +444,9 @@ pub struct KernelFeatures {
 /// walk's near 275 triangles. The box alone (36) runs 2.9 M (512², 64 spp).
 pub const FLAT_SCAN_MAX_TRIANGLES: usize = 192;
 
+/// What one analytic shape costs a flat scan, in triangles (see [`FLAT_SCAN_MAX_TRIANGLES`]).
+pub const FLAT_SCAN_SHAPE_COST: usize = 3;
+
 impl KernelFeatures {
     /// The generic kernel.
     pub const ALL: KernelFeatures = KernelFeatures {
@@ -406,6 +456,7 @@ impl KernelFeatures {
         rough_plastic: true,
         beckmann: true,
         flat_scan: false,
+        shapes: true,
         shading_normals: true,
         wide_filter: true,
     };
@@ -418,6 +469,7 @@ impl KernelFeatures {
         rough_plastic: false,
         beckmann: false,
         flat_scan: false,
+        shapes: false,
         shading_normals: false,
         wide_filter: false,
     };
@@ -426,10 +478,12 @@ impl KernelFeatures {
     pub fn of(scene: &Scene) -> KernelFeatures {
         let mut f = KernelFeatures {
             environment: scene.environment.is_some(),
-            flat_scan: scene.triangle_count() <= FLAT_SCAN_MAX_TRIANGLES,
+            flat_scan: scene.mesh_triangle_count() + FLAT_SCAN_SHAPE_COST * scene.analytic_count()
+                <= FLAT_SCAN_MAX_TRIANGLES,
+            shapes: scene.analytic_count() > 0,
             ..KernelFeatures::NONE
         };
-        f.shading_normals = scene.meshes.iter().any(|m| m.normals.is_some());
+        f.shading_normals = scene.meshes.iter().any(|m| m.normals.is_some() && m.analytic.is_none());
         f.wide_filter = scene.film.filter != hush_scene::PixelFilter::Box;
         for m in scene.meshes.iter().map(|m| &m.material) {
             f.textures |= m.texture().is_some();
@@ -455,20 +509,48 @@ fn v4(v: Vec3, w: f32) -> [f32; 4] {
     [v.x, v.y, v.z, w]
 }
 
-/// Each mesh becomes one material record (its BSDF and emission). Emissive triangles are
-/// picked in proportion to their power (area × summed RGB radiance); the kernel's per-area
-/// density of a light point is that probability divided by the triangle's area, stored in `e1.w`.
-/// Triangles are stored in the leaf order of a BVH built over them.
+/// Each mesh becomes one material record (its BSDF and emission) and its triangles, or, for an
+/// analytic shape, one slot that names its [`GpuShape`]. Emissive slots are picked in proportion to
+/// their power (area × summed RGB radiance); the kernel's per-area density of a light point is
+/// that probability divided by the slot's area, stored in `e1.w`. Slots are stored in the leaf
+/// order of a BVH built over them.
 pub(crate) fn flatten(scene: &Scene) -> Result<GpuScene, TraceError> {
     let mut tris = Vec::with_capacity(scene.triangle_count());
     let mut normals = Vec::with_capacity(scene.triangle_count());
     let mut materials = Vec::with_capacity(scene.meshes.len());
     let mut light_weights = Vec::new();
     let mut aux = Aux::default();
+    let mut shapes = Vec::new();
+    // Each slot's bounds, the point the BVH sorts it by, and its area.
+    let mut slots: Vec<((Vec3, Vec3), Vec3, f32)> = Vec::with_capacity(scene.triangle_count());
     for (mi, mesh) in scene.meshes.iter().enumerate() {
         let emission = mesh.emission.unwrap_or(Vec3::ZERO);
         let emits = emission.max_element() > 0.0;
         materials.push(gpu_material(&mesh.material, emission, &scene.textures, &mut aux)?);
+        if let Some(analytic) = &mesh.analytic {
+            let shape = GpuShape::new(analytic);
+            if !bytemuck::cast_slice::<GpuShape, f32>(std::slice::from_ref(&shape)).iter().all(|x| x.is_finite())
+                || shape.info[2] <= 0.0
+            {
+                return Err(TraceError::Invalid(format!(
+                    "shape '{}' ({}) has a degenerate or non-finite placement: fix its to_world",
+                    mesh.name,
+                    analytic.kind.name()
+                )));
+            }
+            let area = shape.info[2];
+            if emits {
+                light_weights.push((tris.len() as u32, area * emission.element_sum()));
+            }
+            let tag = f32::from_bits(shapes.len() as u32 + 1);
+            let mi = f32::from_bits(mi as u32);
+            tris.push(GpuTri { p0: [0.0, 0.0, 0.0, mi], e1: [0.0; 4], e2: [0.0, 0.0, 0.0, tag] });
+            normals.push(GpuNormals::zeroed());
+            let (lo, hi) = analytic.bounds();
+            slots.push(((lo, hi), (lo + hi) * 0.5, area));
+            shapes.push(shape);
+            continue;
+        }
         let uv = |k: u32| mesh.uvs.as_ref().map_or(Vec2::ZERO, |u| u[k as usize]);
         for (ti, idx) in mesh.indices.iter().enumerate() {
             // Mitsuba takes a surface's front side (for one-sided BSDFs and emitters) from its
@@ -487,6 +569,8 @@ pub(crate) fn flatten(scene: &Scene) -> Result<GpuScene, TraceError> {
                 light_weights.push((tris.len() as u32, mesh.triangle_area(ti) * emission.element_sum()));
             }
             tris.push(GpuTri { p0: v4(a, f32::from_bits(mi as u32)), e1: v4(b - a, 0.0), e2: v4(c - a, 0.0) });
+            let area = 0.5 * (b - a).cross(c - a).length();
+            slots.push(((a.min(b).min(c), a.max(b).max(c)), (a + b + c) / 3.0, area));
             let [t0, t1, t2] = idx.map(uv);
             normals.push(GpuNormals {
                 n: match &mesh.normals {
@@ -498,15 +582,10 @@ pub(crate) fn flatten(scene: &Scene) -> Result<GpuScene, TraceError> {
             });
         }
     }
-    // Reorder the triangles into the BVH's leaf order; lights follow their triangles.
-    let corners: Vec<[Vec3; 3]> = tris
-        .iter()
-        .map(|t| {
-            let p0 = Vec3::from_slice(&t.p0[..3]);
-            [p0, p0 + Vec3::from_slice(&t.e1[..3]), p0 + Vec3::from_slice(&t.e2[..3])]
-        })
-        .collect();
-    let bvh = Bvh::build(&corners);
+    // Reorder the slots into the BVH's leaf order; lights follow their slots.
+    let bounds: Vec<(Vec3, Vec3)> = slots.iter().map(|s| s.0).collect();
+    let centroids: Vec<Vec3> = slots.iter().map(|s| s.1).collect();
+    let bvh = Bvh::build_bounds(&bounds, &centroids);
     if bvh.depth() > STACK_SIZE {
         return Err(TraceError::Invalid(format!(
             "the scene's BVH is {} levels deep; the kernel's traversal stack holds {STACK_SIZE}",
@@ -519,6 +598,7 @@ pub(crate) fn flatten(scene: &Scene) -> Result<GpuScene, TraceError> {
     }
     let mut tris: Vec<GpuTri> = bvh.order.iter().map(|&i| tris[i as usize]).collect();
     let normals: Vec<GpuNormals> = bvh.order.iter().map(|&i| normals[i as usize]).collect();
+    let areas: Vec<f32> = bvh.order.iter().map(|&i| slots[i as usize].2).collect();
     for (tri, _) in light_weights.iter_mut() {
         *tri = new_index[*tri as usize];
     }
@@ -528,8 +608,7 @@ pub(crate) fn flatten(scene: &Scene) -> Result<GpuScene, TraceError> {
     for &(tri, w) in &light_weights {
         running += w as f64;
         let t = &mut tris[tri as usize];
-        let area = 0.5 * Vec3::from_slice(&t.e1[..3]).cross(Vec3::from_slice(&t.e2[..3])).length();
-        t.e1[3] = (w as f64 / total / area as f64) as f32;
+        t.e1[3] = (w as f64 / total / areas[tri as usize] as f64) as f32;
         lights.push(GpuLight { tri, cdf: (running / total) as f32, pad: [0; 2] });
     }
     if let Some(last) = lights.last_mut() {
@@ -537,5 +616,15 @@ pub(crate) fn flatten(scene: &Scene) -> Result<GpuScene, TraceError> {
     }
     let nodes = bvh.nodes.into_iter().map(GpuNode::from).collect();
     let env = environment(scene.environment.as_ref(), &mut aux, !lights.is_empty())?;
-    Ok(GpuScene { nodes, tris, normals, materials, lights, aux: aux.data, env, features: KernelFeatures::of(scene) })
+    Ok(GpuScene {
+        nodes,
+        tris,
+        shapes,
+        normals,
+        materials,
+        lights,
+        aux: aux.data,
+        env,
+        features: KernelFeatures::of(scene),
+    })
 }

@@ -29,7 +29,7 @@ pub struct GenerateArgs {
     /// Seed of the scene.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Scene file to write; its assets (cylinder.obj, textures) go into the same folder.
+    /// Scene file to write; its assets (textures, an environment map) go into the same folder.
     #[arg(long)]
     pub out: PathBuf,
     #[command(flatten)]

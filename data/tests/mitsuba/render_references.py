@@ -149,18 +149,24 @@ def diffuse(rgb):
 def room(light=None, floor_bsdf=None, back_bsdf=None):
     """A 2×2×2 box open towards the camera (+z): white floor, ceiling and back, red left wall,
     green right wall, and a one-sided 1×1 area light under the ceiling facing down (large and
-    dim, so that caustics and its reflections converge in reasonable time)."""
+    dim, so that caustics and its reflections converge in reasonable time); `light=False` leaves
+    the light out."""
     white = diffuse("0.75, 0.75, 0.75")
-    if light is None:
-        light = ('      <scale value="0.5"/>\n      <rotate x="1" angle="90"/>\n      <translate y="0.99"/>', (5.0, 4.2, 3.0))
-    transform, radiance = light
-    r = ", ".join(f"{c:g}" for c in radiance)
-    return (
+    walls = (
         rect('      <rotate x="1" angle="-90"/>\n      <translate y="-1"/>', floor_bsdf or white)
         + rect('      <rotate x="1" angle="90"/>\n      <translate y="1"/>', white)
         + rect('      <translate z="-1"/>', back_bsdf or white)
         + rect('      <rotate y="1" angle="90"/>\n      <translate x="-1"/>', diffuse("0.7, 0.1, 0.1"))
         + rect('      <rotate y="1" angle="-90"/>\n      <translate x="1"/>', diffuse("0.1, 0.6, 0.15"))
+    )
+    if light is False:
+        return walls
+    if light is None:
+        light = ('      <scale value="0.5"/>\n      <rotate x="1" angle="90"/>\n      <translate y="0.99"/>', (5.0, 4.2, 3.0))
+    transform, radiance = light
+    r = ", ".join(f"{c:g}" for c in radiance)
+    return (
+        walls
         + rect(
             transform,
             diffuse("0, 0, 0"),
@@ -182,6 +188,17 @@ def obj(filename, bsdf):
 
 def footer():
     return "</scene>\n"
+
+
+def analytic(kind, params, bsdf, transform="", emitter=None):
+    """One of Mitsuba's analytic shapes (`sphere`, `disk`, `rectangle`, `cylinder`), with its own
+    parameters, an optional to_world and an optional area emitter's radiance."""
+    t = f'    <transform name="to_world">\n{transform}\n    </transform>\n' if transform else ""
+    e = ""
+    if emitter is not None:
+        r = ", ".join(f"{c:g}" for c in emitter)
+        e = f'    <emitter type="area">\n      <rgb name="radiance" value="{r}"/>\n    </emitter>\n'
+    return f'  <shape type="{kind}">\n{params}{t}{bsdf}{e}  </shape>\n'
 
 
 def two_spheres(spp, left_bsdf, right_bsdf):
@@ -419,6 +436,78 @@ def _(spp):
     return files, xml
 
 
+@scene("analytic", "analytic `sphere` (textured), `cylinder` with a `disk` cap, `rectangle` walls; lit only by an emitting `sphere` and an emitting `disk`", 32768)
+def _(spp):
+    files = {"checker.png": checker_image}
+    tex = """    <bsdf type="diffuse">
+      <texture type="bitmap" name="reflectance">
+        <string name="filename" value="checker.png"/>
+      </texture>
+    </bsdf>
+"""
+    plastic = """    <bsdf type="roughplastic">
+      <string name="distribution" value="ggx"/>
+      <float name="alpha" value="0.2"/>
+      <rgb name="diffuse_reflectance" value="0.2, 0.35, 0.8"/>
+    </bsdf>
+"""
+    xml = (
+        header(spp)
+        + room(light=False)
+        # A textured sphere turned so that its texture's seam and poles face the camera's side.
+        + analytic("sphere", "", tex, '      <scale value="0.35"/>\n      <rotate x="1" angle="-70"/>\n'
+                   '      <rotate y="1" angle="30"/>\n      <translate x="-0.4" y="-0.65" z="-0.2"/>')
+        + analytic("cylinder", '    <point name="p0" value="0.45, -1, -0.3"/>\n    <point name="p1" value="0.45, -0.3, -0.3"/>\n'
+                   '    <float name="radius" value="0.25"/>\n', plastic)
+        + analytic("disk", "", diffuse("0.8, 0.75, 0.2"), '      <scale value="0.25"/>\n      <rotate x="1" angle="-90"/>\n'
+                   '      <translate x="0.45" y="-0.3" z="-0.3"/>')
+        # The lights: a small sphere in front and a disk under the ceiling facing down.
+        + analytic("sphere", '    <point name="center" value="-0.35, 0.35, 0.45"/>\n    <float name="radius" value="0.1"/>\n',
+                   diffuse("0, 0, 0"), emitter=(30.0, 25.0, 18.0))
+        + analytic("disk", "", diffuse("0, 0, 0"), '      <scale value="0.3"/>\n      <rotate x="1" angle="90"/>\n'
+                   '      <translate x="0.2" y="0.99" z="-0.1"/>', emitter=(6.0, 5.5, 5.0))
+        + footer()
+    )
+    return files, xml
+
+
+@scene("spheres-sky", "four analytic spheres (diffuse, plastic, rough metal, glass) on a ground rectangle under a `constant` sky", 8192)
+def _(spp):
+    ground = analytic("rectangle", "", diffuse("0.5, 0.5, 0.5"),
+                      '      <scale value="3"/>\n      <rotate x="1" angle="-90"/>\n      <translate y="-0.5"/>')
+    metal = """    <bsdf type="roughconductor">
+      <string name="distribution" value="ggx"/>
+      <string name="material" value="Au"/>
+      <float name="alpha" value="0.1"/>
+    </bsdf>
+"""
+    glass = """    <bsdf type="dielectric">
+      <float name="int_ior" value="1.5"/>
+    </bsdf>
+"""
+    plastic = """    <bsdf type="plastic">
+      <rgb name="diffuse_reflectance" value="0.7, 0.15, 0.1"/>
+    </bsdf>
+"""
+    ball = lambda c, r, bsdf: analytic(  # noqa: E731
+        "sphere", f'    <point name="center" value="{c}"/>\n    <float name="radius" value="{r}"/>\n', bsdf)
+    env = """  <emitter type="constant">
+    <rgb name="radiance" value="0.8, 0.9, 1.1"/>
+  </emitter>
+"""
+    xml = (
+        header(spp, origin="0, 1.2, 3.5", target="0, -0.1, 0", fov=45)
+        + ground
+        + ball("-0.9, -0.1, -0.2", 0.4, diffuse("0.7, 0.7, 0.7"))
+        + ball("-0.05, -0.15, 0.3", 0.35, plastic)
+        + ball("0.75, -0.05, -0.1", 0.45, metal)
+        + ball("0.2, -0.3, 1.0", 0.2, glass)
+        + env
+        + footer()
+    )
+    return {}, xml
+
+
 # ---------------------------------------------------------------- building and rendering
 
 
@@ -475,6 +564,9 @@ def render(mi, dr, name, spp, write):
         sys.exit(f"{name}: Mitsuba rendered NaN or Inf")
     ref = passes.mean(axis=0)
     _, rel, lum_rel = block_stats(passes)
+    image_means = passes.mean(axis=(1, 2))  # per pass and channel
+    image_mean = image_means.mean(axis=0)
+    image_rel_se = image_means.std(axis=0, ddof=1) / math.sqrt(PASSES) / np.maximum(image_mean, 1e-12)
     stats = {
         "scene": name,
         "tests": SCENES[name]["tests"],
@@ -492,6 +584,8 @@ def render(mi, dr, name, spp, write):
         "block_rel_se_max": float(rel.max()),
         "block_rel_se_median": float(np.median(rel[rel > 0])),
         "block_luminance_rel_se_max": float(lum_rel.max()),
+        "image_mean": [float(x) for x in image_mean],
+        "image_mean_rel_se": [float(x) for x in image_rel_se],
         "block_rel_se": np.round(rel, 5).tolist(),
         "note": "relative standard error of each 8×8 block mean per R, G, B (rows, columns, channel), "
         f"from the spread of {PASSES} independent passes; channels darker than 1e-3 of the brightest are 0",

@@ -232,12 +232,14 @@ pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u3
         ctx.advance();
     }
 
-    let aux_files: Vec<String> = AuxKind::ALL.iter().map(|&k| Layout::aux_name(name, &view, k)).collect();
+    let clean = AuxFiles::from_fn(|kind| Layout::aux_name(name, &view, kind));
     let aux_seed = render_seed(plan.seed, name, v, "aux");
-    let kept = previous
-        .as_ref()
-        .and_then(|p| p.aux.clone())
-        .filter(|a| a.spp == plan.aux_spp && a.seed == aux_seed && aux_files.iter().all(|f| ctx.valid(f, &camera)));
+    let kept = previous.as_ref().and_then(|p| p.aux.clone()).filter(|a| {
+        a.spp == plan.aux_spp
+            && a.seed == aux_seed
+            && a.files == clean
+            && AuxKind::ALL.iter().all(|&k| ctx.valid(clean.file(k), &camera))
+    });
     let aux = match kept {
         Some(a) => a,
         None => {
@@ -246,16 +248,11 @@ pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u3
             let mut first_hit = scene.clone();
             first_hit.max_depth = 1;
             let out = ctx.render(&first_hit, plan.aux_spp, aux_seed, &format!("{label} features"))?;
-            for (&kind, file) in AuxKind::ALL.iter().zip(&aux_files) {
-                write_rgb(ctx.layout.path(file), aux_image(&out, kind))?;
+            for kind in AuxKind::ALL {
+                write_rgb(ctx.layout.path(clean.file(kind)), aux_image(&out, kind))?;
             }
             ctx.rendered += 1;
-            AuxRecord {
-                spp: plan.aux_spp,
-                seed: aux_seed,
-                render_seconds: out.seconds,
-                files: AuxFiles::from_fn(|kind| Layout::aux_name(name, &view, kind)),
-            }
+            AuxRecord { spp: plan.aux_spp, seed: aux_seed, render_seconds: out.seconds, files: clean }
         }
     };
     progress.aux = Some(aux);

@@ -15,7 +15,7 @@ use hush_train::{Start, TrainError, read_train_state, train};
 pub use folder::{RunFolder, incompatibilities};
 pub use options::{
     DEFAULT_DEVICE, DEFAULT_FEATURES, DEFAULT_FINETUNE_LR, DEFAULT_WIDTH, INIT_OIDN, RunConfig, TrainOptions, defaults,
-    parse_aux, parse_features, parse_loss, read_init, resolve,
+    parse_aux, parse_features, parse_loss, read_init, resolve, resolve_with_init,
 };
 
 use crate::Observer;
@@ -71,7 +71,7 @@ pub fn run(options: TrainOptions, observer: &dyn Observer) -> Result<TrainOutcom
     if train_images == 0 {
         bail!("{} has no training images at spp {spp:?}", dataset.display());
     }
-    let cfg = resolve(&args, base, train_images)?;
+    let (cfg, given_init) = resolve_with_init(&args, base, train_images)?;
 
     let last = folder.last_checkpoint();
     let resume_bytes = match &stored {
@@ -90,9 +90,11 @@ pub fn run(options: TrainOptions, observer: &dyn Observer) -> Result<TrainOutcom
         _ if args.resume.is_some() => bail!("--resume {}: it has no checkpoints/last.safetensors yet", out.display()),
         _ => None,
     };
-    // A run that starts from trained weights reads them again (a run killed before its first checkpoint
-    // starts over from them), and they must still be the file the configuration recorded.
+    // A run that starts from trained weights uses those `--init` named (read once, by `resolve`); one
+    // configured with them before and killed before its first checkpoint reads them again from the file
+    // the configuration recorded, which must still be those weights.
     let init = match (&cfg.train.init, &resume_bytes) {
+        (Some(_), None) if given_init.is_some() => given_init,
         (Some(record), None) => {
             let (weights, now) = read_init(std::path::Path::new(&record.source), Some(&cfg.train.features))?;
             if now.fnv1a != record.fnv1a {

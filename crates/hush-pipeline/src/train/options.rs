@@ -301,6 +301,16 @@ pub fn read_init(init: &Path, features: Option<&InputFeatures>) -> Result<(Pretr
 /// assert_eq!(resolve(&more, Some(&run), 10).unwrap().train.lr, 1e-4);
 /// ```
 pub fn resolve(args: &TrainOptions, base: Option<&RunConfig>, train_images: usize) -> Result<RunConfig> {
+    resolve_with_init(args, base, train_images).map(|(cfg, _)| cfg)
+}
+
+/// [`resolve`], handing back the `--init` weights it read (when the options name some), so that a run
+/// reads them once.
+pub fn resolve_with_init(
+    args: &TrainOptions,
+    base: Option<&RunConfig>,
+    train_images: usize,
+) -> Result<(RunConfig, Option<Pretrained>)> {
     let b = base.map(|c| &c.train);
     let asked = args.features.as_deref().map(parse_features).transpose()?;
     let init = match &args.init {
@@ -428,7 +438,7 @@ pub fn resolve(args: &TrainOptions, base: Option<&RunConfig>, train_images: usiz
         Some(a) => parse_aux(a)?,
         None => base.map_or(AuxSource::default(), |c| c.aux),
     };
-    Ok(RunConfig { dataset, spp, device, aux, train })
+    Ok((RunConfig { dataset, spp, device, aux, train }, init.map(|(weights, _)| weights)))
 }
 
 #[cfg(test)]

@@ -5,7 +5,7 @@ use std::f64::consts::PI;
 use std::path::Path;
 
 use glam::Vec3;
-use hush_scene::{Mesh, Scene};
+use hush_scene::{Mesh, Scene, ShapeKind};
 
 use crate::scene3;
 
@@ -102,4 +102,83 @@ fn face_normals_drops_obj_vertex_normals() {
     };
     assert!(obj("").normals.is_some());
     assert!(obj(r#"<boolean name="face_normals" value="true"/>"#).normals.is_none());
+}
+
+/// Analytic shapes keep their exact form (`Mesh::analytic`) beside the tessellation: Mitsuba's
+/// placements (a sphere's centre and radius, a cylinder's p0, p1 and radius before `to_world`),
+/// exact areas and bounds, and the tessellation facing the way the exact shape does.
+#[test]
+fn analytic_shapes_keep_their_exact_form() {
+    let sphere = shape(
+        r#"<shape type="sphere"><point name="center" x="1" y="2" z="3"/><float name="radius" value="2"/>
+           <transform name="to_world"><translate x="1"/></transform></shape>"#,
+    );
+    let a = sphere.analytic.expect("a sphere is analytic");
+    assert_eq!(a.kind, ShapeKind::Sphere);
+    let (c, r) = a.sphere();
+    assert!(c.abs_diff_eq(Vec3::new(2.0, 2.0, 3.0), 1e-6) && (r - 2.0).abs() < 1e-6, "{c} {r}");
+    assert_rel(a.area(), 16.0 * PI, 1e-6);
+    assert_eq!(a.bounds(), (Vec3::new(0.0, 0.0, 1.0), Vec3::new(4.0, 4.0, 5.0)));
+    assert!(!a.flip_normals);
+
+    let cyl = shape(
+        r#"<shape type="cylinder"><point name="p0" x="0" y="1" z="0"/><point name="p1" x="0" y="4" z="0"/>
+           <float name="radius" value="0.5"/></shape>"#,
+    );
+    let a = cyl.analytic.expect("a cylinder is analytic");
+    assert_eq!(a.kind, ShapeKind::Cylinder);
+    assert_rel(a.area(), 2.0 * PI * 0.5 * 3.0, 1e-6);
+    assert_rel(cyl.area(), 2.0 * PI * 0.5 * 3.0, 1e-5);
+    // Object-space z runs from p0 to p1; the tube faces outwards.
+    assert!(a.to_world.transform_point3(Vec3::ZERO).abs_diff_eq(Vec3::Y, 1e-6));
+    assert!(a.to_world.transform_point3(Vec3::Z).abs_diff_eq(Vec3::new(0.0, 4.0, 0.0), 1e-6));
+    for t in 0..cyl.indices.len() {
+        let c = cyl.indices[t].map(|i| cyl.positions[i as usize]).iter().sum::<Vec3>() / 3.0;
+        assert!(front(&cyl, t).dot(Vec3::new(c.x, 0.0, c.z)) > 0.0, "triangle {t} faces inwards");
+    }
+    let (lo, hi) = a.bounds();
+    assert!(lo.abs_diff_eq(Vec3::new(-0.5, 1.0, -0.5), 1e-5) && hi.abs_diff_eq(Vec3::new(0.5, 4.0, 0.5), 1e-5));
+
+    let disk = shape(r#"<shape type="disk"><transform name="to_world"><scale x="2" y="0.5"/></transform></shape>"#);
+    assert_rel(disk.analytic.unwrap().area(), PI, 1e-6);
+    let rect = shape(r#"<shape type="rectangle"><transform name="to_world"><scale x="2" y="3"/></transform></shape>"#);
+    assert_rel(rect.analytic.unwrap().area(), 24.0, 1e-6);
+    assert!(shape(r#"<shape type="cube"/>"#).analytic.is_none(), "a cube is twelve triangles");
+}
+
+/// As in Mitsuba, a sphere or cylinder placed by a mirroring map is turned inside out (its
+/// `flip_normals` toggles) and a disk is not; the tessellation faces the same way.
+#[test]
+fn a_mirrored_sphere_is_turned_inside_out_as_in_mitsuba() {
+    let m = shape(r#"<shape type="sphere"><transform name="to_world"><scale x="-1"/></transform></shape>"#);
+    assert!(m.analytic.unwrap().flip_normals);
+    let c = m.indices[0].map(|i| m.positions[i as usize]).iter().sum::<Vec3>() / 3.0;
+    assert!(front(&m, 0).dot(c) < 0.0, "the tessellation faces inwards too");
+    let both = shape(
+        r#"<shape type="sphere"><boolean name="flip_normals" value="true"/>
+           <transform name="to_world"><scale x="-1"/></transform></shape>"#,
+    );
+    assert!(!both.analytic.unwrap().flip_normals);
+    let disk = shape(r#"<shape type="disk"><transform name="to_world"><scale x="-1"/></transform></shape>"#);
+    assert!(!disk.analytic.unwrap().flip_normals);
+}
+
+/// An unevenly scaled sphere (an ellipsoid) or cylinder has no exact form here: it is tessellated,
+/// with a warning that says so.
+#[test]
+fn an_ellipsoid_is_tessellated_with_a_warning() {
+    let xml = scene3(r#"<shape type="sphere"><transform name="to_world"><scale x="2"/></transform></shape>"#);
+    let scene = Scene::from_mitsuba_str(&xml, Path::new("t.xml")).unwrap();
+    assert!(scene.meshes[0].analytic.is_none());
+    assert_eq!(scene.analytic_count(), 0);
+    assert_eq!(scene.mesh_triangle_count(), 3968);
+    assert!(scene.warnings.iter().any(|w| w.contains("tessellated")), "{:?}", scene.warnings);
+    let xml = scene3(
+        r#"<shape type="cylinder"><transform name="to_world"><scale x="2"/></transform></shape>
+           <shape type="cylinder"><transform name="to_world"><scale z="5"/></transform></shape>"#,
+    );
+    let scene = Scene::from_mitsuba_str(&xml, Path::new("t.xml")).unwrap();
+    assert!(scene.meshes[0].analytic.is_none(), "x and y scaled unevenly");
+    assert!(scene.meshes[1].analytic.is_some(), "a longer cylinder is still one");
+    assert_eq!(scene.warnings.len(), 1, "{:?}", scene.warnings);
 }
