@@ -26,7 +26,7 @@ mod upload;
 pub use gpu::{GpuContext, INSTALL_HINT};
 pub use render::{KERNEL_SOURCE, MAX_CACHED_KERNELS, RenderOutput, RenderSettings, Renderer, kernel_source};
 pub use scan::SceneLiterals;
-pub use upload::KernelFeatures;
+pub use upload::{FLAT_SCAN_MAX_TRIANGLES, KernelFeatures, flat_scan_cost};
 
 /// Why a render could not run.
 #[derive(Debug, thiserror::Error)]
