@@ -1023,6 +1023,7 @@ impl Parser<'_, '_> {
             "disk" => Some(ShapeKind::Disk),
             "rectangle" => Some(ShapeKind::Rectangle),
             "cylinder" => Some(ShapeKind::Cylinder),
+            "cube" => Some(ShapeKind::Cube),
             _ => None,
         };
         let placement = match ty.as_str() {

@@ -273,6 +273,10 @@ pub enum ShapeKind {
     /// The open tube of radius 1 about the z axis from z = 0 to z = 1, facing outwards, without
     /// caps (`cylinder`, its `p0`, `p1` and `radius` folded into `to_world`).
     Cylinder,
+    /// The cube [-1, 1]³, facing outwards (`cube`): six rectangles ([`Analytic::cube_faces`]), which
+    /// a flat scan tests in about a quarter of the time of its twelve triangles (lavapipe: 1.9 ns a
+    /// rectangle, 3.6 ns a triangle).
+    Cube,
 }
 
 impl ShapeKind {
@@ -283,6 +287,7 @@ impl ShapeKind {
             ShapeKind::Disk => "disk",
             ShapeKind::Rectangle => "rectangle",
             ShapeKind::Cylinder => "cylinder",
+            ShapeKind::Cube => "cube",
         }
     }
 }
@@ -320,7 +325,7 @@ impl Analytic {
         let same = |a: f32, b: f32| (a - b).abs() <= 1e-4 * a.max(b);
         let perpendicular = |a: Vec3, b: Vec3| a.dot(b).abs() <= 1e-4 * a.length() * b.length();
         match kind {
-            ShapeKind::Disk | ShapeKind::Rectangle => true,
+            ShapeKind::Disk | ShapeKind::Rectangle | ShapeKind::Cube => true,
             ShapeKind::Cylinder => {
                 same(x.length(), y.length()) && perpendicular(x, y) && perpendicular(x, z) && perpendicular(y, z)
             }
@@ -349,7 +354,24 @@ impl Analytic {
             ShapeKind::Disk => std::f64::consts::PI * cross,
             ShapeKind::Rectangle => 4.0 * cross,
             ShapeKind::Cylinder => std::f64::consts::TAU * x.length() as f64 * z.length() as f64,
+            ShapeKind::Cube => self.cube_faces().iter().map(Analytic::area).sum(),
         }
+    }
+
+    /// A cube's six faces as rectangles, in the order and with the texture coordinates of its
+    /// tessellation (each face's u and v axes are the rectangle's x and y); empty for other shapes.
+    pub fn cube_faces(&self) -> Vec<Analytic> {
+        if self.kind != ShapeKind::Cube {
+            return Vec::new();
+        }
+        crate::shapes::cube_face_frames()
+            .into_iter()
+            .map(|face| Analytic {
+                kind: ShapeKind::Rectangle,
+                to_world: self.to_world * face,
+                flip_normals: self.flip_normals,
+            })
+            .collect()
     }
 
     /// Axis-aligned world bounds (min, max): exact for a sphere, the box of the transformed
@@ -359,7 +381,11 @@ impl Analytic {
             let (c, r) = self.sphere();
             return (c - Vec3::splat(r), c + Vec3::splat(r));
         }
-        let (z0, z1) = if self.kind == ShapeKind::Cylinder { (0.0, 1.0) } else { (0.0, 0.0) };
+        let (z0, z1) = match self.kind {
+            ShapeKind::Cylinder => (0.0, 1.0),
+            ShapeKind::Cube => (-1.0, 1.0),
+            _ => (0.0, 0.0),
+        };
         let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
         for corner in 0..8 {
             let x = if corner & 1 == 0 { -1.0 } else { 1.0 };

@@ -40,12 +40,27 @@ pub(crate) fn rectangle() -> Geometry {
     Geometry { positions, normals: Some(vec![Vec3::Z; 4]), uvs: Some(uvs), indices: vec![[0, 1, 2], [0, 2, 3]] }
 }
 
+/// Each face of the cube [-1, 1]³ as the map of the rectangle [-1, 1]² (z = 0, facing +z) onto it:
+/// columns u, v, n = u × v and the translation n.
+pub(crate) fn cube_face_frames() -> Vec<Mat4> {
+    cube_axes()
+        .into_iter()
+        .map(|(n, u, v)| Mat4::from_cols(u.extend(0.0), v.extend(0.0), n.extend(0.0), n.extend(1.0)))
+        .collect()
+}
+
+/// Each face's outward normal and its u and v axes.
+fn cube_axes() -> [(Vec3, Vec3, Vec3); 6] {
+    [Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z].map(|n| {
+        let u = if n.x.abs() > 0.5 { Vec3::Y } else { Vec3::X } * if n.max_element() > 0.0 { 1.0 } else { -1.0 };
+        (n, u, n.cross(u))
+    })
+}
+
 /// 24 vertices (4 per face, so each face is flat), 12 triangles.
 pub(crate) fn cube() -> Geometry {
     let mut g = Geometry { normals: Some(Vec::new()), uvs: Some(Vec::new()), ..Default::default() };
-    for n in [Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z] {
-        let u = if n.x.abs() > 0.5 { Vec3::Y } else { Vec3::X } * if n.max_element() > 0.0 { 1.0 } else { -1.0 };
-        let v = n.cross(u);
+    for (n, u, v) in cube_axes() {
         let base = g.positions.len() as u32;
         for (s, t) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
             g.positions.push(n + u * s + v * t);

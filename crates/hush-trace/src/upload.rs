@@ -45,6 +45,8 @@ impl GpuShape {
             ShapeKind::Disk => SHAPE_DISK,
             ShapeKind::Rectangle => SHAPE_RECTANGLE,
             ShapeKind::Cylinder => SHAPE_CYLINDER,
+            // A cube is uploaded as its faces (`Analytic::cube_faces`).
+            ShapeKind::Cube => unreachable!("a cube is six rectangles"),
         };
         GpuShape {
             to_local: rows(a.to_world.inverse()),
@@ -454,6 +456,8 @@ pub fn flat_scan_cost(kind: hush_scene::ShapeKind) -> usize {
         Disk | Rectangle => 1,
         Sphere => 3,
         Cylinder => 3,
+        // Six rectangles, where its twelve triangles would cost twelve.
+        Cube => 6,
     }
 }
 
@@ -539,27 +543,31 @@ pub(crate) fn flatten(scene: &Scene) -> Result<GpuScene, TraceError> {
         let emits = emission.max_element() > 0.0;
         materials.push(gpu_material(&mesh.material, emission, &scene.textures, &mut aux)?);
         if let Some(analytic) = &mesh.analytic {
-            let shape = GpuShape::new(analytic);
-            if !bytemuck::cast_slice::<GpuShape, f32>(std::slice::from_ref(&shape)).iter().all(|x| x.is_finite())
-                || shape.info[2] <= 0.0
-            {
-                return Err(TraceError::Invalid(format!(
-                    "shape '{}' ({}) has a degenerate or non-finite placement: fix its to_world",
-                    mesh.name,
-                    analytic.kind.name()
-                )));
+            let parts =
+                if analytic.kind == hush_scene::ShapeKind::Cube { analytic.cube_faces() } else { vec![*analytic] };
+            for part in &parts {
+                let shape = GpuShape::new(part);
+                if !bytemuck::cast_slice::<GpuShape, f32>(std::slice::from_ref(&shape)).iter().all(|x| x.is_finite())
+                    || shape.info[2] <= 0.0
+                {
+                    return Err(TraceError::Invalid(format!(
+                        "shape '{}' ({}) has a degenerate or non-finite placement: fix its to_world",
+                        mesh.name,
+                        analytic.kind.name()
+                    )));
+                }
+                let area = shape.info[2];
+                if emits {
+                    light_weights.push((tris.len() as u32, area * emission.element_sum()));
+                }
+                let tag = f32::from_bits(shapes.len() as u32 + 1);
+                let mi = f32::from_bits(mi as u32);
+                tris.push(GpuTri { p0: [0.0, 0.0, 0.0, mi], e1: [0.0; 4], e2: [0.0, 0.0, 0.0, tag] });
+                normals.push(GpuNormals::zeroed());
+                let (lo, hi) = part.bounds();
+                slots.push(((lo, hi), (lo + hi) * 0.5, area));
+                shapes.push(shape);
             }
-            let area = shape.info[2];
-            if emits {
-                light_weights.push((tris.len() as u32, area * emission.element_sum()));
-            }
-            let tag = f32::from_bits(shapes.len() as u32 + 1);
-            let mi = f32::from_bits(mi as u32);
-            tris.push(GpuTri { p0: [0.0, 0.0, 0.0, mi], e1: [0.0; 4], e2: [0.0, 0.0, 0.0, tag] });
-            normals.push(GpuNormals::zeroed());
-            let (lo, hi) = analytic.bounds();
-            slots.push(((lo, hi), (lo + hi) * 0.5, area));
-            shapes.push(shape);
             continue;
         }
         let uv = |k: u32| mesh.uvs.as_ref().map_or(Vec2::ZERO, |u| u[k as usize]);

@@ -143,7 +143,22 @@ fn analytic_shapes_keep_their_exact_form() {
     assert_rel(disk.analytic.unwrap().area(), PI, 1e-6);
     let rect = shape(r#"<shape type="rectangle"><transform name="to_world"><scale x="2" y="3"/></transform></shape>"#);
     assert_rel(rect.analytic.unwrap().area(), 24.0, 1e-6);
-    assert!(shape(r#"<shape type="cube"/>"#).analytic.is_none(), "a cube is twelve triangles");
+    let cube = shape(r#"<shape type="cube"><transform name="to_world"><scale x="2"/></transform></shape>"#);
+    let a = cube.analytic.expect("a cube is analytic");
+    assert_eq!(a.kind, ShapeKind::Cube);
+    assert_rel(a.area(), cube.area(), 1e-6);
+    assert_rel(a.area(), 2.0 * (8.0 + 8.0 + 4.0), 1e-6);
+    // Its faces are rectangles facing out, each the face of the tessellation with the same corners.
+    let faces = a.cube_faces();
+    assert_eq!(faces.len(), 6);
+    for (k, f) in faces.iter().enumerate() {
+        assert_eq!(f.kind, ShapeKind::Rectangle);
+        let centre = f.to_world.transform_point3(Vec3::ZERO);
+        let n = f.to_world.inverse().transpose().transform_vector3(Vec3::Z).normalize();
+        assert!(n.dot(centre) > 0.0, "face {k} faces inwards");
+        let corner = f.to_world.transform_point3(Vec3::new(-1.0, -1.0, 0.0));
+        assert!(corner.abs_diff_eq(cube.positions[4 * k], 1e-6), "face {k}: {corner} vs {}", cube.positions[4 * k]);
+    }
 }
 
 /// As in Mitsuba, a sphere or cylinder placed by a mirroring map is turned inside out (its
