@@ -139,6 +139,10 @@ def rect(transform, bsdf, extra=""):
 """
 
 
+# The ground of the open scenes: a 6×6 rectangle at y = −0.5, facing up.
+GROUND = '      <scale value="3"/>\n      <rotate x="1" angle="-90"/>\n      <translate y="-0.5"/>'
+
+
 def diffuse(rgb):
     return f"""    <bsdf type="diffuse">
       <rgb name="reflectance" value="{rgb}"/>
@@ -368,7 +372,7 @@ def _(spp):
         "diffuse.obj": sphere_obj((-0.55, 0.0, 0.0), 0.5),
         "metal.obj": sphere_obj((0.6, -0.1, 0.3), 0.4),
     }
-    ground = rect('      <scale value="3"/>\n      <rotate x="1" angle="-90"/>\n      <translate y="-0.5"/>', diffuse("0.5, 0.5, 0.5"))
+    ground = rect(GROUND, diffuse("0.5, 0.5, 0.5"))
     metal = """    <bsdf type="roughconductor">
       <string name="distribution" value="ggx"/>
       <string name="material" value="Cu"/>
@@ -393,7 +397,7 @@ def _(spp):
 @scene("constant", "`constant` environment emitter only; diffuse and plastic spheres on a ground plane", 4096)
 def _(spp):
     files = {"diffuse.obj": sphere_obj((-0.55, 0.0, 0.0), 0.5), "plastic.obj": sphere_obj((0.6, -0.1, 0.3), 0.4)}
-    ground = rect('      <scale value="3"/>\n      <rotate x="1" angle="-90"/>\n      <translate y="-0.5"/>', diffuse("0.5, 0.5, 0.5"))
+    ground = rect(GROUND, diffuse("0.5, 0.5, 0.5"))
     plastic = """    <bsdf type="plastic">
       <rgb name="diffuse_reflectance" value="0.7, 0.15, 0.1"/>
     </bsdf>
@@ -473,8 +477,7 @@ def _(spp):
 
 @scene("spheres-sky", "four analytic spheres (diffuse, plastic, rough metal, glass) on a ground rectangle under a `constant` sky", 8192)
 def _(spp):
-    ground = analytic("rectangle", "", diffuse("0.5, 0.5, 0.5"),
-                      '      <scale value="3"/>\n      <rotate x="1" angle="-90"/>\n      <translate y="-0.5"/>')
+    ground = rect(GROUND, diffuse("0.5, 0.5, 0.5"))
     metal = """    <bsdf type="roughconductor">
       <string name="distribution" value="ggx"/>
       <string name="material" value="Au"/>
