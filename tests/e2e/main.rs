@@ -390,7 +390,10 @@ fn dataset_of_two_scenes_passes_check() {
 }
 
 /// With `--split-views` every scene of a multi-scene dataset is trained on and tested on: each scene's last
-/// `--test-views` views form the test split instead of whole scenes.
+/// `--test-views` views form the test split instead of whole scenes; the test split's references have their
+/// own `--test-ref-spp`. `hush train --validation SCENE` then holds that training scene's views out as the
+/// validation split (the test loss and best.safetensors are judged on them, the test split is not read); a
+/// name that is no training scene is refused with the names there are.
 #[test]
 fn split_views_holds_out_each_scenes_last_views() {
     let dir = scratch("dataset-split-views");
@@ -415,6 +418,8 @@ fn split_views_holds_out_each_scenes_last_views() {
         "1",
         "--ref-spp",
         "2",
+        "--test-ref-spp",
+        "3",
         "--size",
         "32",
     ]);
@@ -422,6 +427,32 @@ fn split_views_holds_out_each_scenes_last_views() {
     for scene in ["blue-box", "cbox"] {
         assert_eq!(splits_of(&m, scene), vec!["train", "train", "test"], "{scene}");
     }
+    for v in m["views"].as_array().unwrap() {
+        let expected = if v["split"] == "test" { 3 } else { 2 };
+        assert_eq!(v["reference"]["spp"], expected, "{}_{}", v["scene"], v["view"]);
+    }
+    assert_eq!((m["config"]["ref_spp"].as_u64(), m["config"]["test_ref_spp"].as_u64()), (Some(2), Some(3)));
+
+    let run = dir.join("run");
+    let other = dir.join("other");
+    let train = |validation: &'static str, out: &Path| -> Vec<String> {
+        let args = ["train", "--dataset", s(&ds), "--out", s(out), "--validation", validation, "--steps", "1"];
+        let rest = ["--crop", "32", "--width", "0.0625", "--batch", "1", "--eval-every", "1"];
+        args.iter().chain(&rest).map(|a| a.to_string()).collect()
+    };
+    let args = train("blue-box", &run);
+    let log = expect_success(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    // cbox's two training views at 1 spp are trained on; blue-box's two are the validation split.
+    assert!(log.contains("training on 2 images, validating on 2"), "{log}");
+    let json = |name: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(run.join(name)).unwrap()).unwrap()
+    };
+    assert_eq!(json("config.json")["validation"], serde_json::json!(["blue-box"]));
+    assert_eq!(json("summary.json")["best_measured_on"], "validation scenes blue-box");
+    assert!(run.join("best.safetensors").is_file());
+    let args = train("no-such-scene", &other);
+    let err = expect_error(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(err.contains("--validation no-such-scene") && err.contains("blue-box, cbox"), "{err}");
 }
 
 /// Every file recorded in a manifest file, with its inode and modification time.
@@ -754,6 +785,13 @@ fn train_starts_from_oidn_weights() {
     let t = &cfg["train"];
     assert_eq!((t["net"]["kind"].as_str(), t["net"]["width"].as_f64()), (Some("unet"), Some(1.0)));
     assert_eq!(t["init"]["fnv1a"].as_str().map(str::len), Some(16), "{t}");
+    // The initial weights' test loss is measured before the first step; one step at 1e-9 keeps it.
+    assert!(stderr.contains("the initial weights' test loss"), "{stderr}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("summary.json")).unwrap()).unwrap();
+    let (initial, last) =
+        (summary["initial_test_loss"].as_f64().unwrap(), summary["best"]["test_loss"].as_f64().unwrap());
+    assert!(initial > 0.0 && (initial - last).abs() <= 1e-4 * initial, "initial {initial}, after one step {last}");
 
     let color = ds.join("cbox_v000_000004.hdr.exr");
     let (albedo, normal) = (ds.join("cbox_v000_ref.alb.exr"), ds.join("cbox_v000_ref.nrm.exr"));

@@ -262,6 +262,9 @@ pub struct DatasetConfig {
     pub spp: Vec<u32>,
     pub aux_spp: u32,
     pub ref_spp: u32,
+    /// The test split's references' spp, where it differs from `ref_spp`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub test_ref_spp: Option<u32>,
     pub ref_supersample: u32,
     pub firefly_factor: f32,
     /// Samples per pixel of the independent render each reference is checked against; 0 = no check.

@@ -41,6 +41,11 @@ pub struct TrainConfig {
     /// random weights of `seed`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub init: Option<InitRecord>,
+    /// The layers the optimizer updates (by name, e.g. `dec_conv0`); the others keep their weights. Empty:
+    /// every layer. Fine-tuning a few layers adapts trained weights to a renderer with little room to learn
+    /// the training scenes themselves.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub trainable: Vec<String>,
 }
 
 /// Which trained weights a run started from, as `config.json` records it: enough to tell whether a resumed
@@ -84,6 +89,7 @@ impl TrainConfig {
             eval_every: 10,
             clip_grad_norm: None,
             init: None,
+            trainable: Vec::new(),
         }
     }
 
@@ -130,9 +136,12 @@ impl TrainConfig {
         let (Ok(serde_json::Value::Object(a)), Ok(serde_json::Value::Object(b))) = (a, b) else {
             return vec![];
         };
-        a.iter()
-            .filter(|(k, v)| b.get(*k) != Some(v))
-            .map(|(k, v)| (k.clone(), v.to_string(), b.get(k).map(|v| v.to_string()).unwrap_or_default()))
+        // A field left out of one side (an empty default) differs from a value on the other.
+        let show = |v: Option<&serde_json::Value>| v.map(|v| v.to_string()).unwrap_or_else(|| "(none)".into());
+        let keys: Vec<&String> = a.keys().chain(b.keys().filter(|k| !a.contains_key(*k))).collect();
+        keys.into_iter()
+            .filter(|k| a.get(*k) != b.get(*k))
+            .map(|k| (k.clone(), show(a.get(k)), show(b.get(k))))
             .collect()
     }
 }

@@ -115,6 +115,26 @@ impl Optimizer {
         Optimizer::new(cfg, vars)
     }
 
+    /// An optimizer over the variables of `varmap` whose layer (the name before its first `.`) is among
+    /// `layers`, sorted by name; every variable when `layers` is empty. A layer with no variable is an
+    /// error that lists the layers there are.
+    pub fn for_layers(cfg: OptimizerConfig, varmap: &VarMap, layers: &[String]) -> Result<Self> {
+        let all = Optimizer::for_varmap(cfg, varmap)?;
+        if layers.is_empty() {
+            return Ok(all);
+        }
+        let layer_of = |name: &str| name.split('.').next().unwrap_or(name).to_string();
+        for layer in layers {
+            if !all.vars.iter().any(|(name, _)| &layer_of(name) == layer) {
+                let mut known: Vec<String> = all.vars.iter().map(|(n, _)| layer_of(n)).collect();
+                known.dedup();
+                bail!("no layer {layer} in the network to train; its layers are {}", known.join(", "))
+            }
+        }
+        let vars = all.vars.into_iter().filter(|(name, _)| layers.contains(&layer_of(name))).collect();
+        Optimizer::new(all.cfg, vars)
+    }
+
     pub fn config(&self) -> &OptimizerConfig {
         &self.cfg
     }

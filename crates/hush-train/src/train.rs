@@ -68,6 +68,9 @@ pub struct Trained {
     pub epochs: Vec<EpochRow>,
     /// True if the observer asked to stop before `steps`.
     pub stopped_early: bool,
+    /// The test loss of the initial weights of a run that starts from trained ones ([`Start::Init`]), before
+    /// any step: what fine-tuning must beat.
+    pub initial_test_loss: Option<f64>,
     /// Seconds the steps waited for batches, and seconds of training in total.
     pub loader_seconds: f64,
     pub seconds: f64,
@@ -133,7 +136,7 @@ pub fn train(
 
     let varmap = VarMap::new();
     let net = Net::new(VarBuilder::from_varmap(&varmap, DType::F32, device), &cfg.net)?;
-    let mut opt = Optimizer::for_varmap(cfg.optimizer.clone(), &varmap)?;
+    let mut opt = Optimizer::for_layers(cfg.optimizer.clone(), &varmap, &cfg.trainable)?;
     let mut best = None;
     let first_step = match start {
         Start::Fresh if cfg.init.is_some() => {
@@ -190,6 +193,10 @@ pub fn train(
             state.step + 1
         }
     };
+    let initial_test_loss = match start {
+        Start::Init(_) if !test.is_empty() => Some(test_loss(&net, cfg, test, device)?),
+        _ => None,
+    };
 
     let vars: Vec<_> = opt.vars().iter().map(|(_, v)| v.clone()).collect();
     let start = Instant::now();
@@ -235,6 +242,7 @@ pub fn train(
                     log,
                     epochs: vec![],
                     stopped_early: true,
+                    initial_test_loss,
                     loader_seconds: 0.0,
                     seconds: 0.0,
                 };
@@ -323,6 +331,7 @@ pub fn train(
         log,
         epochs: epoch_rows,
         stopped_early,
+        initial_test_loss,
         loader_seconds: loader_wait.as_secs_f64(),
         seconds: start.elapsed().as_secs_f64(),
     })

@@ -51,6 +51,10 @@ pub struct DatasetArgs {
     /// Samples per (sub)pixel of the reference (rendered with an independent seed).
     #[arg(long, default_value_t = DatasetPlan::DEFAULT_REF_SPP)]
     pub ref_spp: u32,
+    /// Samples per (sub)pixel of the test split's references (default: --ref-spp). Scoring a denoiser
+    /// needs cleaner references than training on them does.
+    #[arg(long)]
+    pub test_ref_spp: Option<u32>,
     /// The reference is rendered at this many times the width and height, then box-downsampled.
     #[arg(long, default_value_t = DatasetPlan::DEFAULT_REF_SUPERSAMPLE)]
     pub ref_supersample: u32,
@@ -113,6 +117,7 @@ impl DatasetArgs {
             test_scenes: self.test_scenes,
             spp: self.spp,
             ref_spp: self.ref_spp,
+            test_ref_spp: self.test_ref_spp,
             ref_supersample: self.ref_supersample,
             firefly_factor: self.firefly_factor,
             ref_check_spp: self.ref_check_spp,

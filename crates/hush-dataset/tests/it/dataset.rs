@@ -175,6 +175,7 @@ fn config(scenes: &[&str], views: u32, spp: &[u32]) -> DatasetConfig {
         spp: spp.to_vec(),
         aux_spp: 4,
         ref_spp: 16,
+        test_ref_spp: None,
         ref_supersample: 2,
         firefly_factor: 4.0,
         ref_check_spp: 0,

@@ -45,6 +45,8 @@ pub struct DatasetPlan {
     pub spp: Vec<u32>,
     /// Samples per (sub)pixel of the reference (rendered with an independent seed).
     pub ref_spp: u32,
+    /// Samples per (sub)pixel of the test split's references (`None`: `ref_spp`).
+    pub test_ref_spp: Option<u32>,
     /// The reference is rendered at this many times the width and height, then box-downsampled.
     pub ref_supersample: u32,
     /// A reference pixel brighter than this many times its brightest neighbour is clamped; 0 is off.
@@ -85,6 +87,7 @@ impl DatasetPlan {
             test_scenes: Vec::new(),
             spp: Self::DEFAULT_SPP.to_vec(),
             ref_spp: Self::DEFAULT_REF_SPP,
+            test_ref_spp: None,
             ref_supersample: Self::DEFAULT_REF_SUPERSAMPLE,
             firefly_factor: hush_dataset::DEFAULT_FIREFLY_FACTOR,
             ref_check_spp: 0,
@@ -113,8 +116,13 @@ impl DatasetPlan {
         if self.scenes.is_empty() && self.procedural == 0 {
             bail!("no scenes: name scene files or folders, or generate --procedural N");
         }
-        if self.spp.is_empty() || self.spp.contains(&0) || self.ref_spp == 0 || self.aux_spp == 0 {
-            bail!("every spp (--spp, --ref-spp, --aux-spp) must be at least 1");
+        if self.spp.is_empty()
+            || self.spp.contains(&0)
+            || self.ref_spp == 0
+            || self.test_ref_spp == Some(0)
+            || self.aux_spp == 0
+        {
+            bail!("every spp (--spp, --ref-spp, --test-ref-spp, --aux-spp) must be at least 1");
         }
         if self.views == 0 || self.test_views > self.views {
             bail!("--views must be at least 1 and --test-views at most --views");
@@ -128,6 +136,14 @@ impl DatasetPlan {
             bail!("shard {i}/{n}: a shard is i/n with 0 <= i < n");
         }
         Ok(())
+    }
+
+    /// Samples per (sub)pixel of the references of `split`.
+    pub fn ref_spp_of(&self, split: Split) -> u32 {
+        match split {
+            Split::Train => self.ref_spp,
+            Split::Test => self.test_ref_spp.unwrap_or(self.ref_spp),
+        }
     }
 
     /// Images rendered or kept per view: the ladder, the features, the reference and its check.
@@ -178,6 +194,7 @@ pub fn build(plan: &DatasetPlan, renderer: &Renderer, observer: &dyn Observer) -
         spp: plan.ladder(),
         aux_spp: plan.aux_spp,
         ref_spp: plan.ref_spp,
+        test_ref_spp: plan.test_ref_spp,
         ref_supersample: plan.ref_supersample,
         firefly_factor: plan.firefly_factor,
         ref_check_spp: plan.ref_check_spp,

@@ -259,10 +259,11 @@ pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u3
     ctx.record(&progress)?;
     ctx.advance();
 
+    let ref_spp = plan.ref_spp_of(split);
     let ref_file = Layout::reference_name(name, &view);
     let ref_seed = render_seed(plan.seed, name, v, "reference");
     let kept = previous.as_ref().and_then(|p| p.reference.clone()).filter(|r| {
-        r.spp == plan.ref_spp
+        r.spp == ref_spp
             && r.seed == ref_seed
             && r.supersample == plan.ref_supersample
             && r.firefly.factor == plan.firefly_factor
@@ -276,7 +277,7 @@ pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u3
             let mut big = scene.clone();
             big.film.width *= ss;
             big.film.height *= ss;
-            let out = ctx.render(&big, plan.ref_spp, ref_seed, &format!("{label} reference {ss}x{ss}"))?;
+            let out = ctx.render(&big, ref_spp, ref_seed, &format!("{label} reference {ss}x{ss}"))?;
             let mut color = out.color;
             let stats = if plan.firefly_factor > 0.0 {
                 despeckle(&mut color, plan.firefly_factor)?
@@ -287,7 +288,7 @@ pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u3
             write_rgb(ctx.layout.path(&ref_file), &image)?;
             ctx.rendered += 1;
             let record = ReferenceRecord {
-                spp: plan.ref_spp,
+                spp: ref_spp,
                 seed: ref_seed,
                 file: ref_file.clone(),
                 render_seconds: out.seconds,

@@ -142,6 +142,9 @@ pub fn incompatibilities(stored: &RunConfig, now: &RunConfig) -> Vec<String> {
     if stored.aux != now.aux {
         out.push(format!("aux: {} in the run, {} now", stored.aux, now.aux));
     }
+    if stored.validation != now.validation {
+        out.push(format!("validation: {:?} in the run, {:?} now", stored.validation, now.validation));
+    }
     if stored.spp != now.spp {
         out.push(format!("spp: {:?} in the run, {:?} now", stored.spp, now.spp));
     }

@@ -20,7 +20,29 @@ pub use options::{
 
 use crate::Observer;
 use folder::{name_batch, save_epoch, write_file};
-use samples::load_split;
+use samples::{Role, load_split};
+
+/// The training split's views without those of the `validation` scenes, and those: an unknown name, or one
+/// of a test scene, is an error that lists the training scenes.
+fn split_validation<'m>(
+    manifest: &'m Manifest,
+    validation: &[String],
+    dataset: &std::path::Path,
+) -> Result<(Vec<&'m hush_dataset::ViewRecord>, Vec<&'m hush_dataset::ViewRecord>)> {
+    let (held, train): (Vec<_>, Vec<_>) = manifest.split(Split::Train).partition(|v| validation.contains(&v.scene));
+    for name in validation {
+        if !held.iter().any(|v| &v.scene == name) {
+            let mut scenes: Vec<&str> = manifest.split(Split::Train).map(|v| v.scene.as_str()).collect();
+            scenes.dedup();
+            bail!(
+                "--validation {name}: no training scene of {} has that name; choose among {}",
+                dataset.display(),
+                scenes.join(", ")
+            );
+        }
+    }
+    Ok((train, held))
+}
 
 /// What a finished [`run`] did.
 #[derive(Clone, Debug)]
@@ -64,8 +86,10 @@ pub fn run(options: TrainOptions, observer: &dyn Observer) -> Result<TrainOutcom
         .context("--dataset is required (or `dataset = ...` in --config)")?;
     let manifest = Manifest::load(&dataset)?;
     let spp = args.spp.clone().or(base.map(|c| c.spp.clone())).unwrap_or_default();
-    let train_images = manifest
-        .split(Split::Train)
+    let validation = args.validation.clone().or(base.map(|c| c.validation.clone())).unwrap_or_default();
+    let (train_views, validation_views) = split_validation(&manifest, &validation, &dataset)?;
+    let train_images = train_views
+        .iter()
         .map(|v| v.noisy.iter().filter(|r| spp.is_empty() || spp.contains(&r.spp)).count())
         .sum::<usize>();
     if train_images == 0 {
@@ -119,8 +143,12 @@ pub fn run(options: TrainOptions, observer: &dyn Observer) -> Result<TrainOutcom
     }
     // The samples after the cheap checks above, before anything is written.
     let loading = std::time::Instant::now();
-    let (samples, names) = load_split(&cfg, &manifest, Split::Train, observer)?;
-    let (test, _) = load_split(&cfg, &manifest, Split::Test, observer)?;
+    let (samples, names) = load_split(&cfg, &train_views, Role::Train, observer)?;
+    let (test, _) = match validation_views.is_empty() {
+        true => load_split(&cfg, &manifest.split(Split::Test).collect::<Vec<_>>(), Role::Test, observer)?,
+        false => load_split(&cfg, &validation_views, Role::Validation, observer)?,
+    };
+    let measured = if validation_views.is_empty() { "testing" } else { "validating" };
     let load_seconds = loading.elapsed().as_secs_f64();
     let checkpoints = folder.checkpoints();
     std::fs::create_dir_all(&checkpoints).with_context(|| format!("creating {}", checkpoints.display()))?;
@@ -138,7 +166,7 @@ pub fn run(options: TrainOptions, observer: &dyn Observer) -> Result<TrainOutcom
     let t = &cfg.train;
     let epochs = t.steps.div_ceil(t.epoch_steps);
     observer.note(&format!(
-        "training on {} images, testing on {} (ready in {load_seconds:.2} s), with {} ({} auxiliary images): {} \
+        "training on {} images, {measured} on {} (ready in {load_seconds:.2} s), with {} ({} auxiliary images): {} \
          steps = {epochs} epochs of {} steps",
         samples.len(),
         test.len(),
@@ -192,6 +220,16 @@ pub fn run(options: TrainOptions, observer: &dyn Observer) -> Result<TrainOutcom
     };
     write_file(&folder.model(), &trained.weights)?;
     let steps = trained.log.len();
+    // The initial weights' test loss is measured when a run starts from them; a resumed run keeps what its
+    // first call measured.
+    let initial_test_loss = trained.initial_test_loss.or_else(|| {
+        let previous: serde_json::Value = serde_json::from_slice(&std::fs::read(folder.summary()).ok()?).ok()?;
+        previous["initial_test_loss"].as_f64()
+    });
+    if let (Some(loss), Some(_)) = (trained.initial_test_loss, &cfg.train.init) {
+        let split = if cfg.validation.is_empty() { "test" } else { "validation" };
+        observer.note(&format!("the initial weights' {split} loss: {loss:.5}"));
+    }
     let best = metrics.iter().rev().find(|r| r.best);
     let summary = serde_json::json!({
         "steps": steps,
@@ -200,8 +238,10 @@ pub fn run(options: TrainOptions, observer: &dyn Observer) -> Result<TrainOutcom
         "loader_share": trained.loader_seconds / trained.seconds.max(1e-9),
         "final_loss": log.last().map(|r| r.loss),
         "best": best.map(|r| serde_json::json!({"epoch": r.epoch, "test_loss": r.test_loss})),
+        "initial_test_loss": initial_test_loss,
         "threads": std::env::var("RAYON_NUM_THREADS").ok(),
         "load_seconds": load_seconds,
+        "best_measured_on": if cfg.validation.is_empty() { "test split".to_string() } else { format!("validation scenes {}", cfg.validation.join(", ")) },
     });
     write_file(&folder.summary(), serde_json::to_string_pretty(&summary)?.as_bytes())?;
     Ok(TrainOutcome {

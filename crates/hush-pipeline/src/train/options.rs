@@ -60,6 +60,10 @@ pub struct TrainOptions {
     /// Dataset folder (from `hush dataset`): its training split is trained on, its test split measured.
     #[cfg_attr(feature = "clap", arg(long))]
     pub dataset: Option<PathBuf>,
+    /// Training scenes (by name) held out as the validation split: not trained on, their views give the test
+    /// loss, best.safetensors and the choice of a run's length, and the dataset's test split is not read.
+    #[cfg_attr(feature = "clap", arg(long, value_delimiter = ','))]
+    pub validation: Option<Vec<String>>,
     /// Run folder: config.json, loss.csv, metrics.csv, checkpoints/, best.safetensors, model.safetensors.
     #[cfg_attr(feature = "clap", arg(long))]
     pub out: Option<PathBuf>,
@@ -123,6 +127,9 @@ pub struct TrainOptions {
     /// Clip the gradients' global L2 norm to this.
     #[cfg_attr(feature = "clap", arg(long))]
     pub clip_grad_norm: Option<f64>,
+    /// Train only these layers (e.g. `enc_conv0,dec_conv0`); the others keep their weights [default: all].
+    #[cfg_attr(feature = "clap", arg(long, value_delimiter = ','))]
+    pub trainable: Option<Vec<String>>,
     /// cpu, or cuda when built with `--features cuda` [default: cpu].
     #[cfg_attr(feature = "clap", arg(long))]
     pub device: Option<String>,
@@ -140,6 +147,9 @@ pub struct RunConfig {
     /// Which auxiliary images go with each noisy input; runs from before the choice trained on the clean ones.
     #[serde(default = "clean_aux")]
     pub aux: AuxSource,
+    /// Training scenes held out as the validation split (empty: the test loss is the test split's).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub validation: Vec<String>,
     pub train: TrainConfig,
 }
 
@@ -162,6 +172,7 @@ impl TrainOptions {
             init,
             aux,
             dataset,
+            validation,
             out,
             features,
             spp,
@@ -180,6 +191,7 @@ impl TrainOptions {
             seed,
             eval_every,
             clip_grad_norm,
+            trainable,
             device
         )
     }
@@ -407,6 +419,7 @@ pub fn resolve_with_init(
         seed: args.seed.unwrap_or(d.seed),
         eval_every: args.eval_every.unwrap_or(d.eval_every),
         clip_grad_norm: args.clip_grad_norm.or(d.clip_grad_norm),
+        trainable: args.trainable.clone().unwrap_or(d.trainable.clone()),
         // The same weights named by another path are the same start.
         init: match (&init, &d.init) {
             (Some((_, now)), Some(then)) if now.fnv1a == then.fnv1a => Some(then.clone()),
@@ -438,7 +451,8 @@ pub fn resolve_with_init(
         Some(a) => parse_aux(a)?,
         None => base.map_or(AuxSource::default(), |c| c.aux),
     };
-    Ok((RunConfig { dataset, spp, device, aux, train }, init.map(|(weights, _)| weights)))
+    let validation = args.validation.clone().or(base.map(|c| c.validation.clone())).unwrap_or_default();
+    Ok((RunConfig { dataset, spp, device, aux, validation, train }, init.map(|(weights, _)| weights)))
 }
 
 #[cfg(test)]

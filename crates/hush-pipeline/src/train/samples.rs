@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use anyhow::{Context, Result, bail};
-use hush_dataset::{Image, Manifest, Split, load_view};
+use hush_dataset::{Image, ViewRecord, load_view};
 use hush_hash::fnv1a;
 use hush_net::transfer::Transfer;
 use hush_train::{PREPARATION_VERSION, TrainSample, decode_samples, round_trip};
@@ -14,19 +14,29 @@ use super::folder::write_file;
 use crate::Observer;
 use crate::eval::aux_of;
 
-/// The samples of one split at the configured spp, named `scene_view@spp`: from the split's f16 cache
-/// beside the dataset (`DATASET/cache/`) when it is intact and was made from this manifest, feature set,
-/// transfer and spp; otherwise prepared from the EXR files and cached for the next run.
+/// Which of a run's sample sets [`load_split`] prepares: it names the cache file, and only training samples
+/// must hold a whole crop.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum Role {
+    Train,
+    Validation,
+    Test,
+}
+
+/// The samples of `views` (one split, or the validation scenes) at the configured spp, named
+/// `scene_view@spp`: from their f16 cache beside the dataset (`DATASET/cache/`) when it is intact and was
+/// made from these records, feature set, transfer and spp; otherwise prepared from the EXR files and cached
+/// for the next run.
 pub(crate) fn load_split(
     cfg: &RunConfig,
-    manifest: &Manifest,
-    split: Split,
+    views: &[&ViewRecord],
+    split: Role,
     observer: &dyn Observer,
 ) -> Result<(Vec<TrainSample>, Vec<String>)> {
     let features = &cfg.train.features;
-    let records: Vec<_> = manifest
-        .split(split)
-        .flat_map(|view| {
+    let records: Vec<_> = views
+        .iter()
+        .flat_map(|&view| {
             view.noisy.iter().filter(|r| cfg.spp.is_empty() || cfg.spp.contains(&r.spp)).map(move |r| (view, r.spp))
         })
         .collect();
@@ -41,7 +51,6 @@ pub(crate) fn load_split(
         Transfer::Pu,
         names.join(" ")
     );
-    let views: Vec<_> = manifest.split(split).collect();
     let key = format!("views {:016x}, preparation {PREPARATION_VERSION}, {what}", fnv1a(&serde_json::to_vec(&views)?));
     let path = cfg.dataset.join("cache").join(format!("{split:?}-{:016x}.f16", fnv1a(what.as_bytes())).to_lowercase());
     let samples = cached_samples(&path, &key, observer, || {
@@ -53,7 +62,7 @@ pub(crate) fn load_split(
         }
         Ok(samples)
     })?;
-    if split == Split::Train {
+    if split == Role::Train {
         for (s, name) in samples.iter().zip(&names) {
             if s.input.width.min(s.input.height) < cfg.train.crop {
                 bail!(

@@ -398,4 +398,24 @@ fn training_starts_from_trained_weights() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("does not record them"), "{err}");
+
+    // Fine-tuning only the output layer: every other tensor keeps the initial weights bit for bit, and the
+    // output layer moves; a layer the network lacks is refused with the ones it has.
+    let mut last_only = cfg.clone();
+    last_only.steps = 3;
+    last_only.trainable = vec!["dec_conv0".into()];
+    let tuned =
+        train(&last_only, &samples, &[], &Device::Cpu, Start::Init(&weights), |_| ControlFlow::Continue(())).unwrap();
+    let tensors = |bytes: &[u8]| candle_core::safetensors::load_buffer(bytes, &Device::Cpu).unwrap();
+    let (before, after) = (tensors(&first.weights), tensors(&tuned.weights));
+    for (name, t) in &before {
+        let same = t.flatten_all().unwrap().to_vec1::<f32>().unwrap()
+            == after[name].flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        assert_eq!(same, !name.starts_with("dec_conv0."), "{name}");
+    }
+    last_only.trainable = vec!["dec_conv9".into()];
+    let err = train(&last_only, &samples, &[], &Device::Cpu, Start::Init(&weights), |_| ControlFlow::Continue(()))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("no layer dec_conv9") && err.contains("enc_conv0"), "{err}");
 }
