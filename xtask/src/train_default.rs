@@ -337,7 +337,7 @@ fn model_card(
         _ => "The run recorded no validation losses.".into(),
     };
     let mut md = format!(
-        "# {name}\n\nhush's denoiser for {takes}: OIDN 2.5.1's official `unet` weights (Apache-2.0) fine-tuned on \
+        "# {name}\n\nhush's candidate denoiser for {takes}: OIDN 2.5.1's official `unet` weights (Apache-2.0) fine-tuned on \
          hush's own renders, each noisy input with its own auxiliary images. `{name}.safetensors` runs with \
          `hush denoise --model`; `{name}.tza` is the same weights in OIDN's format, for OIDN's own runtime \
          (`oidnDenoise -w {name}.tza`).\n\n\
