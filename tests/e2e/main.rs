@@ -916,3 +916,27 @@ fn denoise_without_a_model_uses_official_oidn_for_its_inputs() {
     let stderr = expect_success(&["denoise", "--color", s(&color), "--out", s(&out)]);
     assert!(stderr.contains("model: oidn-2.5.1 rt_hdr "), "{stderr}");
 }
+
+/// `hush denoise` reads and writes PFM, OIDN's format: the color, albedo and normal of a `hush render` EXR
+/// written as PFM files denoise to the image the EXR itself denoises to, bit for bit (the same pixels and
+/// model), and the output is a PFM where its name says so.
+#[test]
+fn denoise_reads_and_writes_pfm() {
+    let dir = scratch("pfm");
+    let render = dir.join("box.exr");
+    expect_success(&["render", s(&cbox()), "--spp", "4", "--width", "24", "--height", "20", "--out", s(&render)]);
+    let exr = hush_dataset::read_exr(&render).unwrap();
+    let paths: Vec<_> = ["color", "albedo", "normal"].iter().map(|n| dir.join(format!("{n}.pfm"))).collect();
+    for (layer, path) in ["", "albedo", "normal"].iter().zip(&paths) {
+        hush_dataset::write_pfm(path, &exr.layer(layer).unwrap()).unwrap();
+    }
+    let (from_exr, from_pfm) = (dir.join("from-exr.exr"), dir.join("from-pfm.pfm"));
+    expect_success(&["denoise", "--color", s(&render), "--out", s(&from_exr)]);
+    let [c, a, n] = [&paths[0], &paths[1], &paths[2]].map(|p| s(p));
+    let stderr = expect_success(&["denoise", "--color", c, "--albedo", a, "--normal", n, "--out", s(&from_pfm)]);
+    assert!(stderr.contains("model: oidn-2.5.1 rt_hdr_alb_nrm"), "{stderr}");
+    assert_eq!(hush_dataset::read_pfm(&from_pfm).unwrap(), hush_dataset::read_rgb(&from_exr).unwrap());
+    // A PFM color carries no feature layers: without the flags the model is color-only.
+    let stderr = expect_success(&["denoise", "--color", c, "--out", s(&from_pfm)]);
+    assert!(stderr.contains("model: oidn-2.5.1 rt_hdr "), "{stderr}");
+}

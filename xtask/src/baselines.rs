@@ -78,7 +78,7 @@ fn check() -> Result<()> {
 }
 
 /// `<venv>/lib/python3.*/site-packages/pyoidn/oidn`: OIDN's library as bundled by pyoidn.
-fn oidn_dir() -> Result<PathBuf> {
+pub fn oidn_dir() -> Result<PathBuf> {
     let dir = site_packages(&venv_dir()).map_err(|e| format!("{e}: run `{SETUP}`"))?.join("pyoidn/oidn");
     if !dir.join("lib").is_dir() {
         return Err(format!("pyoidn's bundled OIDN not found in {}: run `{SETUP}`", dir.display()));

@@ -43,8 +43,9 @@ tasks:
   bench dataset [--size N] [--views N] [--procedural N] [--hush PATH]
                              perspectives per hour of `hush dataset` (default settings) on the Cornell box
                              or on N procedural scenes, of this build or of the one at PATH
-  bench net [--release]      U-Net inference at 512² against official OIDN, a training step's GFLOP/s against
-                             the machine's GEMM rate, peak memory, for 1 and 2 threads
+  bench net [--release]      inference of OIDN's unet_small, unet and unet_large against OIDN 2.5.1 on the same
+                             weights and inputs (warm at 512² and 1080p, whole processes at 960², peak memory),
+                             a training step's GFLOP/s against the machine's GEMM rate for 1 and 2 threads
   bench train [--release] [--steps N]
                              steps per second, the loader's share and the seconds until the samples are
                              ready (from the f16 cache when it is intact) of `hush train` (a narrow U-Net from scratch)

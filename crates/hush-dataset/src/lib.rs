@@ -35,6 +35,7 @@ mod firefly;
 mod image;
 mod layout;
 mod manifest;
+mod pfm;
 mod png;
 mod validate;
 
@@ -50,5 +51,6 @@ pub use manifest::{
     ProceduralRecord, ProceduralScene, ReferenceCheck, ReferenceRecord, RenderRecord, SceneEntry, SkippedScene, Split,
     ViewGeneration, ViewRecord, manifest_files,
 };
+pub use pfm::{read_pfm, write_pfm};
 pub use png::{srgb_encode, write_png_preview};
 pub use validate::{NegativePolicy, check_finite, check_radiance};

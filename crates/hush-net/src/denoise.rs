@@ -3,10 +3,9 @@
 
 use candle_core::Result;
 
-use crate::input::{build_inference_input, finish_color};
+use crate::input::{build_inference_input, finish_color_in_place};
 use crate::net::DenoiseNet;
 use crate::transfer::autoexposure;
-use crate::unet::{hwc_to_nchw, nchw_to_hwc};
 use crate::weights::ModelInfo;
 
 /// Denoises linear HDR `color` (interleaved RGB, `width × height × 3`) with the auxiliary images of
@@ -15,7 +14,7 @@ use crate::weights::ModelInfo;
 /// OIDN's `UNetFilter` with `hdr = true` and `inputScale` unset: exposure = [`autoexposure`] of the color;
 /// the input as [`build_inference_input`] builds it (no ≤ 1 clamp); the image at the top left of a zero
 /// tile padded to a multiple of 16 ([`UNet::forward_padded`](crate::UNet::forward_padded); the patch MLP
-/// pads itself); the output clamped ≥ 0, inverse transfer, ÷ exposure ([`finish_color`]). Returns
+/// pads itself); the output clamped ≥ 0, inverse transfer, ÷ exposure ([`crate::finish_color`]). Returns
 /// interleaved RGB.
 pub fn denoise(
     net: &impl DenoiseNet,
@@ -37,7 +36,7 @@ pub fn denoise(
     }
     let exposure = autoexposure(color, width, height);
     let input = build_inference_input(&info.features, width, height, color, aux, exposure, info.transfer)?;
-    let x = hwc_to_nchw(&input, width, height, info.features.in_channels(), net.net_device())?;
-    let y = net.forward_any_size(&x)?;
-    Ok(finish_color(&nchw_to_hwc(&y)?, exposure, info.transfer))
+    let mut y = net.forward_hwc(input, width, height, info.features.in_channels())?;
+    finish_color_in_place(&mut y, exposure, info.transfer);
+    Ok(y)
 }

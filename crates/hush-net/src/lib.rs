@@ -10,6 +10,8 @@
 //! * [`loss`]: L1, MSE, SSIM, MS-SSIM and the thesis' mix 0.16·L1 + 0.84·(1 − MS-SSIM); `ssim` doubles as
 //!   the evaluation metric.
 //! * [`transfer`]: autoexposure and the PU / log / sRGB transfer functions, on values and tensors.
+//! * [`direct_conv_available`]: whether inference on this CPU takes the AVX-512 direct convolutions in
+//!   a blocked layout (`direct.rs`) instead of Candle's path; training always takes Candle's.
 //! * [`denoise`]: one image through OIDN's whole inference path (autoexposure, input, network, output).
 //! * [`build_input`] (training) / [`build_inference_input`] (denoising) / [`prepare_color`] /
 //!   [`finish_color`]: the network's input and output, as OIDN prepares them ([`InputFeatures`] says which auxiliary images go in, in which order).
@@ -47,6 +49,7 @@
 
 mod conv;
 mod denoise;
+mod direct;
 mod input;
 pub mod loss;
 mod net;
@@ -59,6 +62,7 @@ mod unet;
 mod weights;
 
 pub use denoise::denoise;
+pub use direct::available as direct_conv_available;
 pub use input::{Feature, InputFeatures, build_inference_input, build_input, finish_color, prepare_color};
 pub use loss::Loss;
 pub use net::{DenoiseNet, Net, NetConfig, PATCH_MLP_KIND};

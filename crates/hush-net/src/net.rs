@@ -240,6 +240,14 @@ pub trait DenoiseNet {
     fn net_device(&self) -> &Device;
     /// `N × C × H × W` to `N × 3 × H × W` for any `H, W`.
     fn forward_any_size(&self, x: &Tensor) -> Result<Tensor>;
+    /// One interleaved `height × width × channels` image to interleaved `height × width × 3`, for any
+    /// size; the input is dropped as soon as the network has read it. By default through
+    /// [`Self::forward_any_size`] on an NCHW tensor on the weights' device.
+    fn forward_hwc(&self, input: Vec<f32>, width: usize, height: usize, channels: usize) -> Result<Vec<f32>> {
+        let x = crate::unet::hwc_to_nchw(&input, width, height, channels, self.net_device())?;
+        drop(input);
+        crate::unet::nchw_to_hwc(&self.forward_any_size(&x)?)
+    }
 }
 
 impl DenoiseNet for Net {
@@ -252,6 +260,16 @@ impl DenoiseNet for Net {
     fn forward_any_size(&self, x: &Tensor) -> Result<Tensor> {
         self.forward_padded(x)
     }
+    fn forward_hwc(&self, input: Vec<f32>, width: usize, height: usize, channels: usize) -> Result<Vec<f32>> {
+        match self {
+            Net::UNet(n) => n.forward_hwc(input, width, height, channels),
+            Net::PatchMlp(_) => {
+                let x = crate::unet::hwc_to_nchw(&input, width, height, channels, self.net_device())?;
+                drop(input);
+                crate::unet::nchw_to_hwc(&self.forward_any_size(&x)?)
+            }
+        }
+    }
 }
 
 impl DenoiseNet for UNet {
@@ -263,6 +281,17 @@ impl DenoiseNet for UNet {
     }
     fn forward_any_size(&self, x: &Tensor) -> Result<Tensor> {
         self.forward_padded(x)
+    }
+    /// On a CPU with AVX-512 and weights that record no gradient, straight from the interleaved image
+    /// into [`crate::direct`]'s blocked layout and back, without NCHW copies.
+    fn forward_hwc(&self, input: Vec<f32>, width: usize, height: usize, channels: usize) -> Result<Vec<f32>> {
+        let input = match self.forward_hwc_direct(input, width, height, channels) {
+            Ok(out) => return out,
+            Err(input) => input,
+        };
+        let x = crate::unet::hwc_to_nchw(&input, width, height, channels, self.net_device())?;
+        drop(input);
+        crate::unet::nchw_to_hwc(&self.forward_any_size(&x)?)
     }
 }
 
@@ -291,7 +320,10 @@ mod tests {
         assert!(err.to_string().contains("patch_mlp"), "{err}");
     }
 
-    /// A frozen copy computes what the trained network computes, without recording a graph.
+    /// A frozen copy computes what the trained network computes, without recording a graph. On a CPU
+    /// with AVX-512 a frozen U-Net takes the inference path (`direct.rs`), whose sums run in another order:
+    /// equal up to f32 rounding (1e-5 of the largest output, as `inference_path_matches_training_path`
+    /// bounds it); elsewhere, and for the MLP, bit for bit.
     #[test]
     fn frozen_copies_compute_the_same_without_a_graph() -> Result<()> {
         for cfg in [
@@ -304,8 +336,14 @@ mod tests {
             let x = Tensor::rand(0f32, 1f32, (1, 3, 16, 16), &Device::Cpu)?;
             let (trained, frozen) = (net.forward_padded(&x)?, net.frozen()?.forward_padded(&x)?);
             assert!(trained.track_op() && !frozen.track_op());
+            let scale = trained.abs()?.max_all()?.to_scalar::<f32>()?;
             let diff = (trained - frozen)?.abs()?.max_all()?.to_scalar::<f32>()?;
-            assert_eq!(diff, 0.0);
+            let direct = matches!(cfg, NetConfig::UNet(_)) && crate::direct::available();
+            if direct {
+                assert!(diff <= 1e-5 * scale, "{cfg:?}: max |diff| {diff} against max |y| {scale}");
+            } else {
+                assert_eq!(diff, 0.0, "{cfg:?}");
+            }
         }
         Ok(())
     }

@@ -1,9 +1,10 @@
 //! Open Image Denoise's U-Nets (`unet`, `unet_small`, `unet_large`) and the thesis' autoencoder without skip
 //! connections, layer for layer, with a width multiplier.
 
-use candle_core::{Device, Module, Result, Tensor, bail};
+use candle_core::{DType, Device, Module, Result, Tensor, bail};
 
 use crate::conv::conv3x3;
+use crate::direct;
 use crate::resample::{max_pool2, upsample2, upsample2_cat};
 use candle_nn::{VarBuilder, VarMap};
 use hush_hash::{SplitMix64, fnv1a};
@@ -280,6 +281,22 @@ pub struct UNet {
     dec: Vec<Vec<Conv3x3>>,
     out: Conv3x3,
     skips: bool,
+    /// The inference path's packed weights and buffers ([`direct`]), shared by clones.
+    direct: std::sync::Arc<DirectCache>,
+}
+
+/// What [`UNet`]'s inference path keeps between calls: its weights packed on first use (the tensors of a
+/// network that runs it record no gradient, so they do not change) and its scratch buffers.
+#[derive(Default)]
+struct DirectCache {
+    plan: std::sync::OnceLock<direct::Plan>,
+    scratch: direct::Scratch,
+}
+
+impl std::fmt::Debug for DirectCache {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "DirectCache {{ packed: {}, {:?} }}", self.plan.get().is_some(), self.scratch)
+    }
 }
 
 impl UNet {
@@ -294,7 +311,7 @@ impl UNet {
         let enc = plan.enc.iter().map(|l| take(l.len())).collect();
         let dec = plan.dec.iter().map(|l| take(l.len())).collect();
         let out = take(1).pop().expect("the output layer");
-        Ok(UNet { cfg: cfg.clone(), enc, dec, out, skips: plan.skips })
+        Ok(UNet { cfg: cfg.clone(), enc, dec, out, skips: plan.skips, direct: Default::default() })
     }
 
     pub fn config(&self) -> &UNetConfig {
@@ -345,6 +362,9 @@ impl Module for UNet {
                  (use forward_padded or pad_to_multiple)"
             )
         }
+        if self.runs_direct(input) {
+            return self.forward_direct(input);
+        }
         // skips = [input, pool1, pool2, pool3]
         let mut skips = vec![input.clone()];
         let mut x = input.clone();
@@ -367,6 +387,97 @@ impl Module for UNet {
             }
         }
         self.out.forward(&x)
+    }
+}
+
+impl UNet {
+    /// Whether [`Module::forward`] takes [`direct`]'s convolutions: on a CPU with AVX-512 for f32 tensors
+    /// of which none records a gradient (inference; training keeps Candle's autograd).
+    fn runs_direct(&self, input: &Tensor) -> bool {
+        self.weights_run_direct() && input.device().is_cpu() && input.dtype() == DType::F32 && !input.track_op()
+    }
+
+    /// Whether this CPU and these weights (f32 on the CPU, recording no gradient) take [`direct`].
+    fn weights_run_direct(&self) -> bool {
+        let convs = || self.enc.iter().chain(&self.dec).flatten().chain(std::iter::once(&self.out));
+        direct::available()
+            && self.device().is_cpu()
+            && convs().all(|c| {
+                c.weight.dtype() == DType::F32
+                    && c.bias.dtype() == DType::F32
+                    && !c.weight.track_op()
+                    && !c.bias.track_op()
+            })
+    }
+
+    /// [`crate::DenoiseNet::forward_hwc`] through [`direct`] (the image zero-padded to multiples of
+    /// [`ALIGNMENT`] at the bottom and right inside it, as [`UNet::forward_padded`] pads).
+    /// The input comes back (`Err`) where [`direct`] does not run.
+    pub(crate) fn forward_hwc_direct(
+        &self,
+        input: Vec<f32>,
+        width: usize,
+        height: usize,
+        channels: usize,
+    ) -> std::result::Result<Result<Vec<f32>>, Vec<f32>> {
+        if !self.weights_run_direct() {
+            return Err(input);
+        }
+        Ok((|| {
+            if channels != self.cfg.in_channels || input.len() != width * height * channels {
+                bail!(
+                    "UNet: {} values of {channels} channel(s) do not make a {width}x{height} input of {} channels",
+                    input.len(),
+                    self.cfg.in_channels
+                )
+            }
+            let plan = self.direct_plan_cached()?;
+            Ok(direct::forward_hwc(plan, &self.direct.scratch, input, (width, height, channels)))
+        })())
+    }
+
+    /// The forward pass through [`direct`], the weights packed for it on the first call.
+    fn forward_direct(&self, input: &Tensor) -> Result<Tensor> {
+        direct::forward_tensor(self.direct_plan_cached()?, &self.direct.scratch, input)
+    }
+
+    fn direct_plan_cached(&self) -> Result<&direct::Plan> {
+        Ok(match self.direct.plan.get() {
+            Some(plan) => plan,
+            None => {
+                let plan = self.direct_plan()?;
+                self.direct.plan.get_or_init(|| plan)
+            }
+        })
+    }
+
+    /// The layers packed for [`direct`], the decoder's first convolutions split over their two sources.
+    fn direct_plan(&self) -> Result<direct::Plan> {
+        let layer = |c: &Conv3x3, sources: &[usize]| direct::Layer::new(&c.weight, &c.bias, sources);
+        let inputs = |c: &Conv3x3| c.weight.dims4().map(|d| d.1);
+        let mut prev = self.cfg.in_channels;
+        let mut enc = Vec::new();
+        for convs in &self.enc {
+            let mut level = Vec::new();
+            for c in convs {
+                level.push(layer(c, &[inputs(c)?])?);
+                prev = c.weight.dims4()?.0;
+            }
+            enc.push(level);
+        }
+        let mut dec = Vec::new();
+        for convs in &self.dec {
+            let mut level = Vec::new();
+            for (i, c) in convs.iter().enumerate() {
+                let ci = inputs(c)?;
+                let sources = if i == 0 && self.skips { vec![prev, ci - prev] } else { vec![ci] };
+                level.push(layer(c, &sources)?);
+                prev = c.weight.dims4()?.0;
+            }
+            dec.push(level);
+        }
+        let out = layer(&self.out, &[inputs(&self.out)?])?;
+        Ok(direct::Plan { enc, dec, out, skips: self.skips })
     }
 }
 

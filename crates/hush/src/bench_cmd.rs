@@ -1,13 +1,15 @@
 //! `hush bench`: the measurements behind `cargo xtask bench net`, one per process so that each
 //! reports its own peak memory. Each prints one JSON object on stdout.
 //!
-//! - `inference`: the whole inference path of [`hush_net::denoise`] (autoexposure, input transfer,
-//!   the network on the zero-padded image, output transfer) on a synthetic image, warm median of N.
+//! - `inference`: the whole inference path of `hush denoise` ([`hush_pipeline::Denoiser`]: autoexposure,
+//!   input transfer, the network on the zero-padded image, output transfer) on a synthetic image, warm
+//!   median of N, with given weights (`--weights`) or randomly initialized ones.
 //! - `train-step`: one training step as `hush train` takes it (forward, loss, backward, optimizer
 //!   step) on a synthetic batch, warm median of N, and its achieved GFLOP/s.
 //! - `gemm`: Candle's f32 matrix product on square matrices, the machine's reference rate.
 //!
-//! Weights are randomly initialized: dense convolutions cost the same whatever the values.
+//! Without `--weights`, weights are randomly initialized: dense convolutions cost the same whatever the
+//! values.
 
 use anyhow::{Result, bail};
 use candle_core::{DType, Device, Tensor};
@@ -26,7 +28,7 @@ pub struct BenchArgs {
 
 #[derive(Subcommand, Debug)]
 pub enum BenchWhat {
-    /// Denoise one synthetic size × size image with a randomly initialized network.
+    /// Denoise one synthetic image with given weights or a randomly initialized network.
     Inference(NetArgs),
     /// Training steps on a synthetic batch.
     TrainStep(NetArgs),
@@ -49,9 +51,16 @@ pub struct NetArgs {
     /// Auxiliary features besides the color, e.g. `alb,nrm` (9 channels) or `diff,spec,nrm` (12).
     #[arg(long, default_value = "alb,nrm")]
     pub features: String,
-    /// Image side in pixels (a crop side for train-step).
+    /// Image side in pixels (a crop side for train-step); the width where --height is given.
     #[arg(long, default_value_t = 512)]
     pub size: usize,
+    /// Image height for inference (default: --size, a square).
+    #[arg(long)]
+    pub height: Option<usize>,
+    /// Inference with these weights (a hush `.safetensors` or OIDN `.tza`), loaded as `hush denoise
+    /// --model` loads them, instead of a randomly initialized --kind.
+    #[arg(long)]
+    pub weights: Option<std::path::PathBuf>,
     /// Images per training batch (train-step only).
     #[arg(long, default_value_t = 4)]
     pub batch: usize,
@@ -78,7 +87,12 @@ impl NetArgs {
 
 /// A deterministic, noisy-looking, positive image of `channels` interleaved channels.
 fn synthetic(size: usize, channels: usize, salt: u32) -> Vec<f32> {
-    (0..size * size * channels)
+    synthetic_rect(size, size, channels, salt)
+}
+
+/// [`synthetic`] of `width × height` pixels.
+fn synthetic_rect(width: usize, height: usize, channels: usize, salt: u32) -> Vec<f32> {
+    (0..width * height * channels)
         .map(|i| {
             let h = (i as u32 ^ salt).wrapping_mul(0x9E37_79B9).rotate_left(13).wrapping_mul(0x85EB_CA6B);
             (h >> 8) as f32 / (1u32 << 24) as f32
@@ -130,26 +144,39 @@ fn new_net(info: &ModelInfo, device: &Device) -> Result<(VarMap, Net)> {
 }
 
 fn inference(a: &NetArgs, device: &Device) -> Result<serde_json::Value> {
-    let info = a.info()?;
+    let (width, height) = (a.size, a.height.unwrap_or(a.size));
+    if height == 0 {
+        bail!("--height must be at least 1")
+    }
     // Loaded from weight bytes as `hush denoise` loads a model: plain tensors, not training variables,
     // whose ops would record the graph and keep every activation alive until the output is dropped.
-    let (varmap, _) = new_net(&info, device)?;
-    let (net, _) = hush_net::load_model(&hush_net::save_weights(&varmap, &info)?, device)?;
-    drop(varmap);
-    let color = synthetic(a.size, 3, 1);
-    let aux: Vec<Vec<f32>> = (0..info.features.aux.len()).map(|i| synthetic(a.size, 3, 2 + i as u32)).collect();
-    let aux_refs: Vec<&[f32]> = aux.iter().map(Vec::as_slice).collect();
+    let denoiser = match &a.weights {
+        Some(path) => hush_pipeline::Denoiser::load(path)?,
+        None => {
+            let info = a.info()?;
+            let (varmap, _) = new_net(&info, device)?;
+            hush_pipeline::Denoiser::from_bytes(&hush_net::save_weights(&varmap, &info)?, false)?
+        }
+    };
+    let info = denoiser.info.clone();
+    let image = |salt| hush_dataset::Image::new(width, height, 3, synthetic_rect(width, height, 3, salt));
+    let color = image(1)?;
+    let aux: Vec<hush_dataset::Image> =
+        (0..info.features.aux.len()).map(|i| image(2 + i as u32)).collect::<Result<_, _>>()?;
+    let aux_refs: Vec<&hush_dataset::Image> = aux.iter().collect();
     let (seconds, cpu, all) = time(a.runs, || {
-        hush_net::denoise(&net, &info, a.size, a.size, &color, &aux_refs)?;
+        denoiser.denoise(&color, &aux_refs)?;
         Ok(())
     })?;
-    let padded = a.size.div_ceil(hush_net::ALIGNMENT) * hush_net::ALIGNMENT;
-    let flop = 2.0 * info.net.multiply_adds(padded, padded) as f64;
+    let align = |n: usize| n.div_ceil(hush_net::ALIGNMENT) * hush_net::ALIGNMENT;
+    let flop = 2.0 * info.net.multiply_adds(align(height), align(width)) as f64;
     Ok(serde_json::json!({
         "what": "inference",
+        "weights": a.weights.as_ref().map(|p| p.display().to_string()),
         "kind": info.net.kind_name(), "width": info.net.as_unet().map(|u| u.width),
         "in_channels": info.net.in_channels(),
-        "size": a.size, "device": format!("{device:?}"),
+        "size": a.size, "image_width": width, "image_height": height, "device": format!("{device:?}"),
+        "direct_convolutions": hush_net::direct_conv_available(),
         "seconds": seconds, "cpu_seconds": cpu, "runs_seconds": all,
         "gflop": flop / 1e9, "gflops": flop / 1e9 / seconds,
         "peak_rss_bytes": peak_rss_bytes(), "threads": threads(),

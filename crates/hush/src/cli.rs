@@ -147,8 +147,9 @@ pub struct DenoiseArgs {
     /// or rt_hdr for color only].
     #[arg(long)]
     pub model: Option<PathBuf>,
-    /// Noisy image: an RGB EXR, or a multi-layer EXR from `hush render` whose layers then
-    /// supply the auxiliary inputs.
+    /// Noisy image: an RGB EXR, a multi-layer EXR from `hush render` whose layers then
+    /// supply the auxiliary inputs, or an RGB PFM (OIDN's format; the features then come from the flags,
+    /// in EXR or PFM).
     #[arg(long)]
     pub color: PathBuf,
     #[arg(long)]
@@ -159,7 +160,7 @@ pub struct DenoiseArgs {
     pub diffuse: Option<PathBuf>,
     #[arg(long)]
     pub specular: Option<PathBuf>,
-    /// Output EXR (R,G,B).
+    /// Output EXR (R,G,B), or PFM where the name ends in `.pfm`.
     #[arg(long)]
     pub out: PathBuf,
 }

@@ -2,7 +2,7 @@
 //! from the layers of a `hush render` EXR.
 
 use anyhow::{Context, Result, bail};
-use hush_dataset::{Image, read_exr, read_rgb, write_rgb};
+use hush_dataset::{ExrImage, Image, read_exr, read_pfm, read_rgb, write_pfm, write_rgb};
 use hush_net::{Feature, InputFeatures};
 use hush_pipeline::Denoiser;
 use hush_pipeline::official::official_for;
@@ -14,15 +14,34 @@ fn layer_name(f: Feature) -> &'static str {
     f.long_name()
 }
 
+/// Whether `path` names a PFM file (OIDN's format), by its extension; anything else is read as EXR.
+fn is_pfm(path: &std::path::Path) -> bool {
+    path.extension().is_some_and(|e| e.eq_ignore_ascii_case("pfm"))
+}
+
+/// An RGB image from an EXR or a PFM file.
+fn read_image(path: &std::path::Path) -> Result<Image> {
+    Ok(if is_pfm(path) { read_pfm(path)? } else { read_rgb(path)? })
+}
+
 pub fn run(args: DenoiseArgs) -> Result<()> {
-    let exr = read_exr(&args.color)?;
+    // A PFM color is one RGB image (its features come from the flags); an EXR may carry them as layers.
+    let (color, exr): (Image, Option<ExrImage>) = if is_pfm(&args.color) {
+        (read_pfm(&args.color)?, None)
+    } else {
+        let exr = read_exr(&args.color)?;
+        let color = exr.layer("").with_context(|| format!("reading the color of {}", args.color.display()))?;
+        (color, Some(exr))
+    };
     let given = |f: Feature| match f {
         Feature::Albedo => &args.albedo,
         Feature::Normal => &args.normal,
         Feature::Diffuse => &args.diffuse,
         Feature::Specular => &args.specular,
     };
-    let has_layer = |f: Feature| exr.channels.keys().any(|k| k.starts_with(&format!("{}.", layer_name(f))));
+    let has_layer = |f: Feature| {
+        exr.as_ref().is_some_and(|exr| exr.channels.keys().any(|k| k.starts_with(&format!("{}.", layer_name(f)))))
+    };
     let (model, model_name) = match &args.model {
         Some(path) => (Denoiser::load(path)?, path.display().to_string()),
         None => {
@@ -40,7 +59,6 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
             (Denoiser::official(&weights)?, weights.method_name())
         }
     };
-    let color = exr.layer("").with_context(|| format!("reading the color of {}", args.color.display()))?;
     for f in Feature::ALL.into_iter().filter(|f| given(*f).is_some() && !model.features().contains(f)) {
         eprintln!("warning: --{} is ignored: model {} takes {}", f.long_name(), model_name, model.info.features);
     }
@@ -48,8 +66,8 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
     for &f in model.features() {
         let given = given(f);
         let image = match given {
-            Some(path) => read_rgb(path)?,
-            None if has_layer(f) => exr.layer(layer_name(f))?,
+            Some(path) => read_image(path)?,
+            None if has_layer(f) => exr.as_ref().expect("has_layer found it").layer(layer_name(f))?,
             None => bail!(
                 "model {} needs --{} (its features are {}); {} has no '{}' layer either",
                 model_name,
@@ -79,6 +97,10 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
         start.elapsed().as_secs_f64(),
         args.out.display()
     );
-    write_rgb(&args.out, &out)?;
+    if is_pfm(&args.out) {
+        write_pfm(&args.out, &out)?
+    } else {
+        write_rgb(&args.out, &out)?
+    }
     Ok(())
 }

@@ -6,6 +6,7 @@ mod dataset;
 mod exr;
 mod firefly;
 mod image;
+mod pfm;
 mod png;
 mod validate;
 

@@ -30,14 +30,18 @@ impl Denoiser {
     /// shapes.
     pub fn load(path: &Path) -> Result<Denoiser> {
         let bytes = std::fs::read(path).with_context(|| format!("reading model {}", path.display()))?;
-        let device = crate::device(None)?;
         let is_tza = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("tza"));
-        let loaded = if is_tza {
-            load_tza(&bytes, None, &device).map(|(net, info)| (Net::from(net), info))
+        Denoiser::from_bytes(&bytes, is_tza).with_context(|| format!("loading model {}", path.display()))
+    }
+
+    /// [`Self::load`] of a file's bytes: TZA where `is_tza`, else a hush safetensors model.
+    pub fn from_bytes(bytes: &[u8], is_tza: bool) -> Result<Denoiser> {
+        let device = crate::device(None)?;
+        let (net, info) = if is_tza {
+            load_tza(bytes, None, &device).map(|(net, info)| (Net::from(net), info))?
         } else {
-            load_model(&bytes, &device)
+            load_model(bytes, &device)?
         };
-        let (net, info) = loaded.with_context(|| format!("loading model {}", path.display()))?;
         Ok(Denoiser { net, info })
     }
 

@@ -30,7 +30,7 @@ pub(crate) enum Role {
 pub(crate) fn load_split(
     cfg: &RunConfig,
     views: &[&ViewRecord],
-    split: Role,
+    role: Role,
     observer: &dyn Observer,
 ) -> Result<(Vec<TrainSample>, Vec<String>)> {
     let features = &cfg.train.features;
@@ -46,13 +46,13 @@ pub(crate) fn load_split(
     // dataset replaces its cache rather than adding one; the key inside also covers the records of this
     // split's views (files, seeds, sizes) and how samples are prepared, and a mismatch rebuilds the file.
     let what = format!(
-        "features {features} ({} aux), transfer {:?}, {split:?} split, samples {}",
+        "features {features} ({} aux), transfer {:?}, {role:?} split, samples {}",
         cfg.aux,
         Transfer::Pu,
         names.join(" ")
     );
     let key = format!("views {:016x}, preparation {PREPARATION_VERSION}, {what}", fnv1a(&serde_json::to_vec(&views)?));
-    let path = cfg.dataset.join("cache").join(format!("{split:?}-{:016x}.f16", fnv1a(what.as_bytes())).to_lowercase());
+    let path = cfg.dataset.join("cache").join(format!("{role:?}-{:016x}.f16", fnv1a(what.as_bytes())).to_lowercase());
     let samples = cached_samples(&path, &key, observer, || {
         let mut samples = Vec::new();
         for &(view, spp) in &records {
@@ -62,7 +62,7 @@ pub(crate) fn load_split(
         }
         Ok(samples)
     })?;
-    if split == Role::Train {
+    if role == Role::Train {
         for (s, name) in samples.iter().zip(&names) {
             if s.input.width.min(s.input.height) < cfg.train.crop {
                 bail!(
