@@ -145,7 +145,7 @@ fn inference(hush: &Path) -> Result<serde_json::Value> {
         helper(&python, &ld_path, &args)
     };
     let mut warm = Vec::new();
-    for (w, h, runs) in [(512usize, 512usize, 5usize), (1920, 1080, 3)] {
+    for (w, h, runs) in [(512usize, 512usize, 5usize), (1920, 1080, 5)] {
         let dir = inputs(w, h)?;
         for (kind, weights, clean) in MODELS {
             let hush_row = hush_json(

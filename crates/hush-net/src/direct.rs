@@ -12,7 +12,9 @@
 //! - **Winograd** ([`conv_winograd`], every layer whose image has even sides): tile rows in parallel; a
 //!   task transforms its 4×4 input tiles of every input block (`Bᵀ d B`: additions), runs the kernel as 16
 //!   GEMMs over the input channels (one per transformed position, 2.25× fewer multiplications than direct
-//!   convolution) and transforms back (`Aᵀ m A`) with the bias and ReLU.
+//!   convolution) and transforms back (`Aᵀ m A`) with the bias and ReLU; where a 2×2 max pooling follows
+//!   (each encoder level's last convolution), the 2×2 output tile is the pooling window, so only the
+//!   pooled pixel is stored.
 //! - **Direct** ([`conv_direct`], odd sides): OIDN's loop order, input blocks outer, accumulating in the
 //!   output rows. **Narrow** ([`conv_narrow`]): the 3-channel output layer as per-pixel dot products, not
 //!   13 padding channels.
@@ -554,14 +556,22 @@ impl Src<'_> {
     }
 }
 
-/// `relu?(conv3x3(concat(sources)) + bias)` into a new [`Blocked`] of the layer's channels: Winograd's
-/// F(2×2, 3×3) where the layer has its weights and the image even sides, else direct (upsampled sources
-/// then stored first).
-fn conv(sources: &[Src], layer: &Layer, relu: bool, scratch: &Alloc) -> Blocked {
+/// `relu?(conv3x3(concat(sources)) + bias)` into a new [`Blocked`] of the layer's channels, 2×2
+/// max-pooled where `pool` is set (the encoder's levels end so): Winograd's F(2×2, 3×3) where the layer
+/// has its weights and the image even sides (its 2×2 output tiles are the pooling windows, so the
+/// full-size output is never stored), else direct (upsampled sources then stored first, and the output
+/// pooled after).
+fn conv(sources: &[Src], layer: &Layer, relu: bool, pool: bool, scratch: &Alloc) -> Blocked {
     let (h, w) = sources[0].size();
     debug_assert!(sources.iter().all(|s| s.size() == (h, w)));
     match (&layer.winograd, &layer.narrow) {
-        (Some(packed), None) if h % 2 == 0 && w % 2 == 0 => conv_winograd(sources, packed, relu, scratch),
+        (Some(packed), None) if h % 2 == 0 && w % 2 == 0 => conv_winograd(sources, packed, relu, pool, scratch),
+        _ if pool => {
+            let full = conv(sources, layer, relu, false, scratch);
+            let pooled = full.max_pool2(scratch);
+            scratch.give(full);
+            pooled
+        }
         _ => {
             let ups: Vec<Blocked> = sources
                 .iter()
@@ -654,10 +664,12 @@ const TILE_STRIDE: usize = 17 * LANES;
 /// additions only), then per group of output blocks computes the 16 products of the transformed weights
 /// and inputs summed over input channels (a GEMM per position ξ, by the same register [`kernel`]), and
 /// transforms them back (`Aᵀ m A`), adding the bias and applying the ReLU as it stores the output.
-fn conv_winograd(sources: &[Src], packed: &Packed, relu: bool, scratch: &Alloc) -> Blocked {
+fn conv_winograd(sources: &[Src], packed: &Packed, relu: bool, pool: bool, scratch: &Alloc) -> Blocked {
     let (h, w) = sources[0].size();
     debug_assert!(h % 2 == 0 && w % 2 == 0);
-    let mut out = Blocked::for_output(packed.co, h, w, scratch);
+    // Pooled, a tile is one output pixel.
+    let (oh, ow, px) = if pool { (h / 2, w / 2, 1) } else { (h, w, 2) };
+    let mut out = Blocked::for_output(packed.co, oh, ow, scratch);
     if scratch.is_dry() {
         return out;
     }
@@ -739,16 +751,16 @@ fn conv_winograd(sources: &[Src], packed: &Packed, relu: bool, scratch: &Alloc) 
                 for t in 0..nt {
                     for o in 0..ob {
                         // SAFETY: reads the 16 vectors of M at tile t, block o (inside `m`) and writes the
-                        // 2×2 output pixels of tile (ty, t0+t) of output block first+o, inside `out` and
-                        // written by this task only.
+                        // 2×2 output pixels (pooled: the one pixel) of tile (ty, t0+t) of output block
+                        // first+o, inside `out` and written by this task only.
                         #[allow(unsafe_code)]
                         unsafe {
                             output_transform(
                                 m.as_ptr().add((t * ob + o) * TILE_STRIDE),
                                 packed.bias[(first + o) * LANES..].as_ptr(),
-                                dst.get().add(out_offset(first + o, 2 * ty, h, w) + 2 * (t0 + t) * LANES),
+                                dst.get().add(out_offset(first + o, px * ty, oh, ow) + px * (t0 + t) * LANES),
                                 out_row_stride,
-                                relu,
+                                (relu, pool),
                             )
                         };
                     }
@@ -799,7 +811,7 @@ unsafe fn input_transform(src: *const f32, rows: &[usize; 4], cols: &[usize; 4],
 }
 
 /// `Aᵀ m A + bias` (ReLU'd if asked) of the 16 vectors `m + 16·ξ` into the 2×2 output pixels at
-/// `dst` (rows `row_stride` apart).
+/// `dst` (rows `row_stride` apart), or with `pool` their maximum into the one pixel at `dst`.
 ///
 /// # Safety
 /// AVX-512F; the sources and the destination pixels must be valid.
@@ -807,7 +819,13 @@ unsafe fn input_transform(src: *const f32, rows: &[usize; 4], cols: &[usize; 4],
 #[allow(unsafe_code)]
 #[target_feature(enable = "avx512f")]
 #[allow(clippy::needless_range_loop)] // register tiles: indices into fixed arrays of vectors
-unsafe fn output_transform(m: *const f32, bias: *const f32, dst: *mut f32, row_stride: usize, relu: bool) {
+unsafe fn output_transform(
+    m: *const f32,
+    bias: *const f32,
+    dst: *mut f32,
+    row_stride: usize,
+    (relu, pool): (bool, bool),
+) {
     use std::arch::x86_64::*;
     // SAFETY: the caller's contract.
     unsafe {
@@ -820,14 +838,22 @@ unsafe fn output_transform(m: *const f32, bias: *const f32, dst: *mut f32, row_s
         ];
         let b = _mm512_loadu_ps(bias);
         let zero = _mm512_setzero_ps();
-        for (i, si) in s.iter().enumerate() {
+        let y: [[__m512; 2]; 2] = std::array::from_fn(|i| {
+            let si = &s[i];
             let y = [
                 _mm512_add_ps(_mm512_add_ps(_mm512_add_ps(si[0], si[1]), si[2]), b),
                 _mm512_add_ps(_mm512_sub_ps(_mm512_sub_ps(si[1], si[2]), si[3]), b),
             ];
-            for (j, &yj) in y.iter().enumerate() {
-                let yj = if relu { _mm512_max_ps(yj, zero) } else { yj };
-                _mm512_storeu_ps(dst.add(i * row_stride + j * LANES), yj);
+            y.map(|v| if relu { _mm512_max_ps(v, zero) } else { v })
+        });
+        if pool {
+            let m = _mm512_max_ps(_mm512_max_ps(y[0][0], y[0][1]), _mm512_max_ps(y[1][0], y[1][1]));
+            _mm512_storeu_ps(dst, m);
+        } else {
+            for (i, yi) in y.iter().enumerate() {
+                for (j, &yj) in yi.iter().enumerate() {
+                    _mm512_storeu_ps(dst.add(i * row_stride + j * LANES), yj);
+                }
             }
         }
     }
@@ -841,7 +867,7 @@ unsafe fn input_transform(_: *const f32, _: &[usize; 4], _: &[usize; 4], _: *mut
 
 #[cfg(not(target_arch = "x86_64"))]
 #[allow(unsafe_code)]
-unsafe fn output_transform(_: *const f32, _: *const f32, _: *mut f32, _: usize, _: bool) {
+unsafe fn output_transform(_: *const f32, _: *const f32, _: *mut f32, _: usize, _: (bool, bool)) {
     unreachable!("direct convolutions run only where `available` is true")
 }
 
@@ -1192,18 +1218,17 @@ fn forward_blocked(plan: &Plan, scratch: &Alloc, input: Blocked) -> Blocked {
     let mut skips = vec![input];
     let mut x: Option<Blocked> = None;
     for (level, layers) in plan.enc.iter().enumerate() {
-        for layer in layers {
+        for (i, layer) in layers.iter().enumerate() {
             let cur = x.as_ref().unwrap_or_else(|| skips.last().expect("the input"));
-            let y = conv(&[Src::Full(cur)], layer, true, scratch);
+            // Levels 0–3 end in a pooling, done by their last convolution.
+            let pool = level < 4 && i + 1 == layers.len();
+            let y = conv(&[Src::Full(cur)], layer, true, pool, scratch);
             if let Some(old) = x.replace(y) {
                 scratch.give(old);
             }
         }
         if level < 4 {
-            let pooled = x.as_ref().unwrap_or_else(|| skips.last().expect("the input")).max_pool2(scratch);
-            if let Some(old) = x.take() {
-                scratch.give(old);
-            }
+            let pooled = x.take().expect("every level has a convolution");
             if level < 3 {
                 skips.push(pooled);
             } else {
@@ -1217,9 +1242,9 @@ fn forward_blocked(plan: &Plan, scratch: &Alloc, input: Blocked) -> Blocked {
         let mut cur: Option<Blocked> = None;
         for (i, layer) in layers.iter().enumerate() {
             let y = match (&cur, i == 0 && plan.skips) {
-                (None, true) => conv(&[Src::Up(&low), Src::Full(&skip)], layer, true, scratch),
-                (None, false) => conv(&[Src::Up(&low)], layer, true, scratch),
-                (Some(c), _) => conv(&[Src::Full(c)], layer, true, scratch),
+                (None, true) => conv(&[Src::Up(&low), Src::Full(&skip)], layer, true, false, scratch),
+                (None, false) => conv(&[Src::Up(&low)], layer, true, false, scratch),
+                (Some(c), _) => conv(&[Src::Full(c)], layer, true, false, scratch),
             };
             if let Some(old) = cur.replace(y) {
                 scratch.give(old);
@@ -1233,7 +1258,7 @@ fn forward_blocked(plan: &Plan, scratch: &Alloc, input: Blocked) -> Blocked {
         x = cur;
     }
     let last = x.expect("the decoder's output");
-    let y = conv(&[Src::Full(&last)], &plan.out, false, scratch);
+    let y = conv(&[Src::Full(&last)], &plan.out, false, false, scratch);
     scratch.give(last);
     y
 }
