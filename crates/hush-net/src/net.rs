@@ -244,10 +244,19 @@ pub trait DenoiseNet {
     /// size; the input is dropped as soon as the network has read it. By default through
     /// [`Self::forward_any_size`] on an NCHW tensor on the weights' device.
     fn forward_hwc(&self, input: Vec<f32>, width: usize, height: usize, channels: usize) -> Result<Vec<f32>> {
-        let x = crate::unet::hwc_to_nchw(&input, width, height, channels, self.net_device())?;
-        drop(input);
-        crate::unet::nchw_to_hwc(&self.forward_any_size(&x)?)
+        forward_hwc_as_tensor(self, input, (width, height, channels))
     }
+}
+
+/// [`DenoiseNet::forward_hwc`] through [`DenoiseNet::forward_any_size`] on an NCHW tensor.
+fn forward_hwc_as_tensor(
+    net: &(impl DenoiseNet + ?Sized),
+    input: Vec<f32>,
+    (width, height, channels): (usize, usize, usize),
+) -> Result<Vec<f32>> {
+    let x = crate::unet::hwc_to_nchw(&input, width, height, channels, net.net_device())?;
+    drop(input);
+    crate::unet::nchw_to_hwc(&net.forward_any_size(&x)?)
 }
 
 impl DenoiseNet for Net {
@@ -263,11 +272,7 @@ impl DenoiseNet for Net {
     fn forward_hwc(&self, input: Vec<f32>, width: usize, height: usize, channels: usize) -> Result<Vec<f32>> {
         match self {
             Net::UNet(n) => n.forward_hwc(input, width, height, channels),
-            Net::PatchMlp(_) => {
-                let x = crate::unet::hwc_to_nchw(&input, width, height, channels, self.net_device())?;
-                drop(input);
-                crate::unet::nchw_to_hwc(&self.forward_any_size(&x)?)
-            }
+            Net::PatchMlp(_) => forward_hwc_as_tensor(self, input, (width, height, channels)),
         }
     }
 }
@@ -285,13 +290,10 @@ impl DenoiseNet for UNet {
     /// On a CPU with AVX-512 and weights that record no gradient, straight from the interleaved image
     /// into [`crate::direct`]'s blocked layout and back, without NCHW copies.
     fn forward_hwc(&self, input: Vec<f32>, width: usize, height: usize, channels: usize) -> Result<Vec<f32>> {
-        let input = match self.forward_hwc_direct(input, width, height, channels) {
-            Ok(out) => return out,
-            Err(input) => input,
-        };
-        let x = crate::unet::hwc_to_nchw(&input, width, height, channels, self.net_device())?;
-        drop(input);
-        crate::unet::nchw_to_hwc(&self.forward_any_size(&x)?)
+        match self.forward_hwc_direct(input, width, height, channels) {
+            Ok(out) => out,
+            Err(input) => forward_hwc_as_tensor(self, input, (width, height, channels)),
+        }
     }
 }
 
