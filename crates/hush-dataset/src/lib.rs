@@ -1,7 +1,8 @@
-//! AOV images, EXR/PNG I/O and the on-disk dataset layout of hush. No GPU, no Candle.
+//! AOV images, EXR/PFM/PNG I/O and the on-disk dataset layout of hush. No GPU, no Candle.
 //!
 //! * [`Image`]: an interleaved (HWC) f32 image with crop, channel stacking and statistics.
 //! * [`write_exr`] / [`read_exr`]: named channel groups in one EXR file (`R,G,B`, `normal.X`, `albedo.R`, ...).
+//! * [`write_pfm`] / [`read_pfm`]: RGB or one-channel PFM files, the format of OIDN's command-line tools.
 //! * [`write_png_preview`]: an 8-bit sRGB preview.
 //! * [`write_atomic`]: every file this crate writes appears complete or not at all.
 //! * [`check_finite`] / [`check_radiance`]: NaN/Inf and negative-radiance checks that name the pixel.
