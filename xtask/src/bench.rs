@@ -70,7 +70,8 @@ pub fn run(args: &[String]) -> Result<()> {
     }
 }
 
-fn ratio(a: &serde_json::Value, b: &serde_json::Value) -> serde_json::Value {
+/// `a / b` as JSON, or null where either is missing or `b` is not positive.
+pub(crate) fn ratio(a: &serde_json::Value, b: &serde_json::Value) -> serde_json::Value {
     match (a.as_f64(), b.as_f64()) {
         (Some(a), Some(b)) if b > 0.0 => serde_json::json!(a / b),
         _ => serde_json::Value::Null,

@@ -15,7 +15,7 @@ use std::path::Path;
 use std::process::Command;
 
 use crate::baselines;
-use crate::bench::flags;
+use crate::bench::{flags, ratio};
 use crate::util::{Result, build_hush, ensure_vulkan, load_average, output, project_root, spawn, target_dir};
 use crate::util::{read_json, write_json};
 
@@ -31,9 +31,8 @@ fn hush_json(hush: &Path, threads: Option<usize>, args: &[&str]) -> Result<serde
 
 /// The Python helper of the inference rows (the baselines' venv: numpy and pyoidn's bundled OIDN).
 /// `inputs DIR W H` writes `color.pfm`, `albedo.pfm` and `normal.pfm` (deterministic noise; the values do
-/// not change the cost of dense convolutions); `run N CMD...` runs a command N times and prints the wall
-/// seconds of each run, the peak resident memory of the largest run (the children's `ru_maxrss`) and the
-/// last run's output.
+/// not change the cost of dense convolutions); `run CMD...` runs a command once and prints its wall
+/// seconds, its peak resident memory (the child's `ru_maxrss`) and its output.
 const HELPER: &str = r#"
 import json, resource, subprocess, sys, time
 import numpy as np
@@ -46,17 +45,14 @@ if sys.argv[1] == "inputs":
             f.write(b"PF\n%d %d\n-1.0\n" % (w, h))
             f.write(np.ascontiguousarray(a[::-1]).tobytes())
 else:
-    n, cmd = int(sys.argv[2]), sys.argv[3:]
-    seconds, text = [], ""
-    for _ in range(n):
-        t = time.perf_counter()
-        p = subprocess.run(cmd, capture_output=True, text=True)
-        seconds.append(time.perf_counter() - t)
-        if p.returncode != 0:
-            sys.exit(f"{' '.join(cmd)} failed ({p.returncode}): {p.stderr[-2000:]}")
-        text = p.stdout + p.stderr
+    cmd = sys.argv[2:]
+    t = time.perf_counter()
+    p = subprocess.run(cmd, capture_output=True, text=True)
+    seconds = time.perf_counter() - t
+    if p.returncode != 0:
+        sys.exit(f"{' '.join(cmd)} failed ({p.returncode}): {p.stderr[-2000:]}")
     peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024
-    print(json.dumps({"seconds": seconds, "peak_rss_bytes": peak, "output": text}))
+    print(json.dumps({"seconds": seconds, "peak_rss_bytes": peak, "output": p.stdout + p.stderr}))
 "#;
 
 /// OIDN's CPU models and the official weights of each (all with color, albedo and normal). The large
@@ -137,11 +133,8 @@ fn inference(hush: &Path) -> Result<serde_json::Value> {
         v.extend(["-o".into(), out.into()]);
         v
     };
-    let run = |n: usize, cmd: &[String]| -> Result<serde_json::Value> {
-        let mut args: Vec<&str> = vec!["run"];
-        let n = n.to_string();
-        args.push(&n);
-        args.extend(cmd.iter().map(String::as_str));
+    let run = |cmd: &[String]| -> Result<serde_json::Value> {
+        let args: Vec<&str> = std::iter::once("run").chain(cmd.iter().map(String::as_str)).collect();
         helper(&python, &ld_path, &args)
     };
     let mut warm = Vec::new();
@@ -165,7 +158,7 @@ fn inference(hush: &Path) -> Result<serde_json::Value> {
             )?;
             let mut cmd = oidn_args(weights, clean, &dir, &path(dir.join("oidn-out.pfm")));
             cmd.extend(["-n".into(), (runs + 1).to_string(), "-v".into(), "2".into()]);
-            let oidn_row = run(1, &cmd)?;
+            let oidn_row = run(&cmd)?;
             let oidn_times = oidn_warm_seconds(oidn_row["output"].as_str().unwrap_or_default());
             let oidn_seconds = median(&oidn_times);
             let hush_seconds = hush_row["seconds"].as_f64();
@@ -206,10 +199,10 @@ fn inference(hush: &Path) -> Result<serde_json::Value> {
     let oidn_cmd = oidn_args(weights, false, &dir, &path(dir.join("oidn-out.pfm")));
     let (mut hush_s, mut oidn_s, mut hush_rss, mut oidn_rss) = (Vec::new(), Vec::new(), 0f64, 0f64);
     for _ in 0..5 {
-        let a = run(1, &hush_cmd)?;
-        let b = run(1, &oidn_cmd)?;
-        hush_s.extend(a["seconds"].as_array().into_iter().flatten().filter_map(|v| v.as_f64()));
-        oidn_s.extend(b["seconds"].as_array().into_iter().flatten().filter_map(|v| v.as_f64()));
+        let a = run(&hush_cmd)?;
+        let b = run(&oidn_cmd)?;
+        hush_s.extend(a["seconds"].as_f64());
+        oidn_s.extend(b["seconds"].as_f64());
         hush_rss = hush_rss.max(a["peak_rss_bytes"].as_f64().unwrap_or(0.0));
         oidn_rss = oidn_rss.max(b["peak_rss_bytes"].as_f64().unwrap_or(0.0));
     }
@@ -229,13 +222,6 @@ fn inference(hush: &Path) -> Result<serde_json::Value> {
         "goal": "hush_over_oidn_seconds <= 1.0 for unet warm at 512x512 and 1920x1080 and for the whole \
                  process at 960x960; hush_over_oidn_peak_rss <= 1.0",
     }))
-}
-
-fn ratio(a: &serde_json::Value, b: &serde_json::Value) -> serde_json::Value {
-    match (a.as_f64(), b.as_f64()) {
-        (Some(a), Some(b)) if b > 0.0 => serde_json::json!(a / b),
-        _ => serde_json::Value::Null,
-    }
 }
 
 /// The smaller of two `seconds` results, with its thread count.

@@ -145,7 +145,7 @@ impl Blocked {
 
     /// The offset of pixel `(y, x)` of block `b` in border coordinates (`0..h+2`, `0..w+2`).
     fn at(&self, b: usize, y: usize, x: usize) -> usize {
-        b * self.block_stride() + y * self.row_stride() + x * LANES
+        pixel_offset((self.h, self.w), b, y, x)
     }
 
     /// A `c`-channel `h × w` tensor whose interior row `y` of block `b` (`w × 16` values) `fill(b, y, row)`
@@ -258,9 +258,10 @@ impl Blocked {
     }
 }
 
-/// The offset of the interior of row `y` of block `b` in a [`Blocked`] of `h × w` pixels.
-fn out_offset(b: usize, y: usize, h: usize, w: usize) -> usize {
-    ((b * (h + 2) + y + 1) * (w + 2) + 1) * LANES
+/// [`Blocked::at`] of a tensor of `h × w` pixels: the offset of pixel `(y, x)` of block `b` in border
+/// coordinates (for tasks that hold only a pointer to the tensor's data).
+fn pixel_offset((h, w): (usize, usize), b: usize, y: usize, x: usize) -> usize {
+    ((b * (h + 2) + y) * (w + 2) + x) * LANES
 }
 
 /// Output blocks per register tile, at most.
@@ -471,6 +472,18 @@ struct Packed {
 /// Winograd's F(2×2, 3×3) (Lavin and Gray 2016): `G`, `Bᵀ` and `Aᵀ` as in [`crate::conv`]'s F2.
 const WINO_G: [[f32; 3]; 4] = [[1.0, 0.0, 0.0], [0.5, 0.5, 0.5], [0.5, -0.5, 0.5], [0.0, 0.0, 1.0]];
 
+/// Block and lane of each input channel of the concatenation of sources of `sources[i]` channels: each
+/// source starts a block.
+fn input_places(sources: &[usize]) -> Vec<(usize, usize)> {
+    let mut places = Vec::with_capacity(sources.iter().sum());
+    let mut first_block = 0;
+    for &c in sources {
+        places.extend((0..c).map(|i| (first_block + i / LANES, i % LANES)));
+        first_block += c.div_ceil(LANES);
+    }
+    places
+}
+
 impl Packed {
     /// From OIHW `weight` (`co × Σ sources × 3 × 3`) and `bias` (`co`), the input channels split over
     /// sources of `sources[i]` channels in order; transformed by `G g Gᵀ` for Winograd.
@@ -489,13 +502,7 @@ impl Packed {
                 group
             })
             .collect();
-        // Input channel i of the concatenation: its block and lane.
-        let mut places = Vec::with_capacity(ci);
-        let mut first_block = 0;
-        for &c in sources {
-            places.extend((0..c).map(|i| (first_block + i / LANES, i % LANES)));
-            first_block += c.div_ceil(LANES);
-        }
+        let places = input_places(sources);
         for &(first, count, offset) in &groups {
             let row = count * LANES;
             for o in first * LANES..(first * LANES + row).min(co) {
@@ -534,8 +541,19 @@ impl Packed {
 const TASK_COLUMNS: usize = 256;
 
 /// The input blocks of the concatenation of `sources`, in order.
-fn input_blocks(sources: &[&Blocked]) -> Vec<InputBlock> {
-    sources.iter().flat_map(|s| InputBlock::of(s, false)).collect()
+fn input_blocks<'a>(sources: impl IntoIterator<Item = Src<'a>>) -> Vec<InputBlock> {
+    sources
+        .into_iter()
+        .flat_map(|s| match s {
+            Src::Full(b) => InputBlock::of(b, false),
+            Src::Up(b) => InputBlock::of(b, true),
+        })
+        .collect()
+}
+
+/// The offsets of the 9 taps of a 3×3 window from its top-left pixel, in rows of `row_stride`.
+fn taps(row_stride: usize) -> [usize; 9] {
+    std::array::from_fn(|t| (t / 3) * row_stride + (t % 3) * LANES)
 }
 
 /// A convolution's source: a tensor at the output's size, or one at half the size read upsampled ×2
@@ -606,10 +624,10 @@ fn conv_direct(sources: &[&Blocked], packed: &Packed, relu: bool, scratch: &Allo
     }
     let dst = SharedMut(out.data.as_mut_ptr());
     let out_block_stride = out.block_stride();
-    let blocks = input_blocks(sources);
+    let blocks = input_blocks(sources.iter().map(|s| Src::Full(s)));
     debug_assert_eq!(blocks.len(), packed.in_blocks);
     let row_stride = sources[0].row_stride();
-    let taps: [usize; 9] = std::array::from_fn(|t| (t / 3) * row_stride + (t % 3) * LANES);
+    let taps = taps(row_stride);
     let column_tiles = w.div_ceil(TASK_COLUMNS);
     let per_tile = w.div_ceil(column_tiles);
     let tasks = h * column_tiles * packed.groups.len();
@@ -631,7 +649,7 @@ fn conv_direct(sources: &[&Blocked], packed: &Packed, relu: bool, scratch: &Allo
                     steps: &taps,
                     weights: packed.data[offset + ib * weights_per_block..].as_ptr(),
                     init: if ib == 0 { Init::Bias(packed.bias[first * LANES..].as_ptr()) } else { Init::Load },
-                    out: dst.get().wrapping_add(out_offset(first, y, h, w) + x * LANES),
+                    out: dst.get().wrapping_add(pixel_offset((h, w), first, y + 1, x + 1)),
                     out_pixel: LANES,
                     out_block: out_block_stride,
                     relu: relu && ib + 1 == blocks.len(),
@@ -675,13 +693,7 @@ fn conv_winograd(sources: &[Src], packed: &Packed, relu: bool, pool: bool, scrat
     }
     let dst = SharedMut(out.data.as_mut_ptr());
     let out_row_stride = out.row_stride();
-    let blocks: Vec<InputBlock> = sources
-        .iter()
-        .flat_map(|s| match s {
-            Src::Full(b) => InputBlock::of(b, false),
-            Src::Up(b) => InputBlock::of(b, true),
-        })
-        .collect();
+    let blocks = input_blocks(sources.iter().copied());
     let nb = blocks.len();
     debug_assert_eq!(nb, packed.in_blocks);
     let (tiles_y, tiles_x) = (h / 2, w / 2);
@@ -758,7 +770,7 @@ fn conv_winograd(sources: &[Src], packed: &Packed, relu: bool, pool: bool, scrat
                             output_transform(
                                 m.as_ptr().add((t * ob + o) * TILE_STRIDE),
                                 packed.bias[(first + o) * LANES..].as_ptr(),
-                                dst.get().add(out_offset(first + o, px * ty, oh, ow) + px * (t0 + t) * LANES),
+                                dst.get().add(pixel_offset((oh, ow), first + o, px * ty + 1, px * (t0 + t) + 1)),
                                 out_row_stride,
                                 (relu, pool),
                             )
@@ -890,18 +902,12 @@ impl Narrow {
         let ci: usize = sources.iter().sum();
         let in_blocks: usize = sources.iter().map(|c| c.div_ceil(LANES)).sum();
         let mut data = vec![0f32; in_blocks * 9 * co * LANES];
-        let (mut first_block, mut first_channel) = (0, 0);
-        for &c in sources {
-            for i in 0..c {
-                let (b, l) = (first_block + i / LANES, i % LANES);
-                for o in 0..co {
-                    for tap in 0..9 {
-                        data[((b * 9 + tap) * co + o) * LANES + l] = weight[(o * ci + first_channel + i) * 9 + tap];
-                    }
+        for (i, (b, l)) in input_places(sources).into_iter().enumerate() {
+            for o in 0..co {
+                for tap in 0..9 {
+                    data[((b * 9 + tap) * co + o) * LANES + l] = weight[(o * ci + i) * 9 + tap];
                 }
             }
-            first_block += c.div_ceil(LANES);
-            first_channel += c;
         }
         Narrow { co, data, bias: bias.to_vec() }
     }
@@ -918,9 +924,9 @@ fn conv_narrow(sources: &[&Blocked], narrow: &Narrow, relu: bool, scratch: &Allo
         return out;
     }
     let dst = SharedMut(out.data.as_mut_ptr());
-    let blocks = input_blocks(sources);
+    let blocks = input_blocks(sources.iter().map(|s| Src::Full(s)));
     let row_stride = sources[0].row_stride();
-    let taps: [usize; 9] = std::array::from_fn(|t| (t / 3) * row_stride + (t % 3) * LANES);
+    let taps = taps(row_stride);
     (0..h).into_par_iter().for_each(|y| {
         let mut x = 0;
         while x < w {
@@ -931,7 +937,7 @@ fn conv_narrow(sources: &[&Blocked], narrow: &Narrow, relu: bool, scratch: &Allo
                 taps: &taps,
                 weights: narrow.data.as_ptr(),
                 bias: &narrow.bias,
-                out: dst.get().wrapping_add(out_offset(0, y, h, w) + x * LANES),
+                out: dst.get().wrapping_add(pixel_offset((h, w), 0, y + 1, x + 1)),
                 relu,
             };
             // SAFETY: reads rows y..y+3, columns x..x+r+2 of every input block (inside: the border), the

@@ -326,15 +326,16 @@ impl UNet {
     /// Every weight and bias as `(name, tensor)`, in the order of [`UNetConfig::conv_shapes`]
     /// (`enc_conv0.weight`, `enc_conv0.bias`, ...): what TZA export writes.
     pub fn named_tensors(&self) -> Vec<(String, Tensor)> {
-        self.enc
-            .iter()
-            .chain(&self.dec)
-            .flatten()
-            .chain(std::iter::once(&self.out))
+        self.convs()
             .flat_map(|c| {
                 [(format!("{}.weight", c.name), c.weight.clone()), (format!("{}.bias", c.name), c.bias.clone())]
             })
             .collect()
+    }
+
+    /// Every convolution in the order of [`UNetConfig::conv_shapes`].
+    fn convs(&self) -> impl Iterator<Item = &Conv3x3> {
+        self.enc.iter().chain(&self.dec).flatten().chain(std::iter::once(&self.out))
     }
 
     /// Pads `x` (NCHW) with zeros at the bottom and right to multiples of [`ALIGNMENT`], runs the
@@ -399,10 +400,9 @@ impl UNet {
 
     /// Whether this CPU and these weights (f32 on the CPU, recording no gradient) take [`direct`].
     fn weights_run_direct(&self) -> bool {
-        let convs = || self.enc.iter().chain(&self.dec).flatten().chain(std::iter::once(&self.out));
         direct::available()
             && self.device().is_cpu()
-            && convs().all(|c| {
+            && self.convs().all(|c| {
                 c.weight.dtype() == DType::F32
                     && c.bias.dtype() == DType::F32
                     && !c.weight.track_op()

@@ -78,10 +78,16 @@ impl NetArgs {
         let net = UNetConfig { kind, in_channels: features.in_channels(), out_channels: 3, width: self.width };
         let info = ModelInfo { net: net.into(), features, transfer: Transfer::Pu };
         info.validate()?;
-        if self.size == 0 || self.runs == 0 || self.batch == 0 {
-            bail!("--size, --runs and --batch must be at least 1")
-        }
+        self.check_counts()?;
         Ok(info)
+    }
+
+    /// Sizes and counts of at least 1 (also where `--weights` replaces `--kind`, which [`Self::info`] reads).
+    fn check_counts(&self) -> Result<()> {
+        if self.size == 0 || self.height == Some(0) || self.runs == 0 || self.batch == 0 {
+            bail!("--size, --height, --runs and --batch must be at least 1")
+        }
+        Ok(())
     }
 }
 
@@ -144,10 +150,8 @@ fn new_net(info: &ModelInfo, device: &Device) -> Result<(VarMap, Net)> {
 }
 
 fn inference(a: &NetArgs, device: &Device) -> Result<serde_json::Value> {
+    a.check_counts()?;
     let (width, height) = (a.size, a.height.unwrap_or(a.size));
-    if height == 0 {
-        bail!("--height must be at least 1")
-    }
     // Loaded from weight bytes as `hush denoise` loads a model: plain tensors, not training variables,
     // whose ops would record the graph and keep every activation alive until the output is dropped.
     let denoiser = match &a.weights {
