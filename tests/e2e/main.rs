@@ -232,13 +232,13 @@ fn pipeline_runs_end_to_end() {
     check_eval_report(&report);
 }
 
-/// What `hush eval` writes on the pipeline's dataset (one test view, 1 and 2 spp): summary.json (schema 3)
+/// What `hush eval` writes on the pipeline's dataset (one test view, 1 and 2 spp): summary.json (schema 4)
 /// with separate render and denoise seconds, the error-against-time CSV, comparisons and plots, pictures,
-/// report.md and a self-contained report.html.
+/// the viewer's HDR images, report.md and a self-contained report.html with the viewer first.
 fn check_eval_report(report: &Path) {
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(report.join("summary.json")).unwrap()).unwrap();
-    assert_eq!(summary["schema"], 3);
+    assert_eq!(summary["schema"], 4);
     let rows = summary["rows"].as_array().unwrap();
     let methods: Vec<&str> = rows.iter().map(|r| r["method"].as_str().unwrap()).collect();
     // Official OIDN comes by default, for the model's features.
@@ -265,9 +265,21 @@ fn check_eval_report(report: &Path) {
     let lines: Vec<&str> = csv.lines().collect();
     assert_eq!(lines[0], "view,method,spp,render_seconds,denoise_seconds,seconds,rel_mse,one_minus_ssim");
     assert_eq!(lines.len(), 9, "noisy, the model, OIDN and the filter at 1 and 2 spp:\n{csv}");
-    for plot in ["error_vs_time_rel_mse.png", "error_vs_time_one_minus_ssim.png"] {
-        let png = image::open(report.join(plot)).unwrap().to_rgb8();
-        assert!(png.pixels().any(|p| p.0 == [0, 0, 0]), "{plot} draws the noisy curve in black");
+    for plot in ["error_vs_time_rel_mse.svg", "error_vs_time_one_minus_ssim.svg"] {
+        let svg = std::fs::read_to_string(report.join(plot)).unwrap();
+        assert!(svg.contains("stroke=\"#000000\""), "{plot} draws the noisy curve in black");
+        assert_eq!(hush_plot::texts(&svg, "legend"), ["noisy", "run/model", oidn, "guided"], "{plot}");
+        assert_eq!(hush_plot::texts(&svg, "x-title"), ["render + denoise time (s) (log scale)"]);
+    }
+    let viewers = summary["viewers"].as_array().unwrap();
+    assert_eq!(viewers.len(), 1, "one test view");
+    let images: Vec<&str> =
+        viewers[0]["images"].as_array().unwrap().iter().map(|i| i["method"].as_str().unwrap()).collect();
+    assert_eq!(images, ["noisy", "run/model", oidn, "guided", "reference"]);
+    for image in viewers[0]["images"].as_array().unwrap() {
+        let bytes = std::fs::read(report.join(image["path"].as_str().unwrap())).unwrap();
+        let decoded = hush_eval::viewer::decode_hdr(&bytes, 32, 32).unwrap();
+        assert!(decoded.data.iter().all(|v| v.is_finite() && *v >= 0.0), "{image}");
     }
     let pictures = report.join("pictures");
     for kind in ["noisy_crop", "run-model_crop", "guided_crop", "reference_crop", "noisy_diff", "guided_diff"] {
@@ -281,12 +293,15 @@ fn check_eval_report(report: &Path) {
         md.contains("auxiliary inputs: each noisy render's own auxiliary images, at its spp (`--aux noisy`)"),
         "{md}"
     );
-    assert!(md.contains("](error_vs_time_rel_mse.png)") && md.contains("run/model at 1 spp"), "{md}");
+    assert!(md.contains("](error_vs_time_rel_mse.svg)") && md.contains("run/model at 1 spp"), "{md}");
     let html = std::fs::read_to_string(report.join("report.html")).unwrap();
     assert!(html.starts_with("<!DOCTYPE html>") && html.trim_end().ends_with("</html>"));
     let images = html.matches("<img ").count();
-    assert_eq!(images, 2 + 5 + 4, "two plots, five crops, four difference pictures");
+    assert_eq!(images, 5 + 4, "five crops, four difference pictures");
     assert_eq!(html.matches("src=\"data:image/png;base64,").count(), images, "every image is inline");
+    assert_eq!(html.matches("<svg ").count(), 2, "two plots, inline");
+    assert!(html.find("class=\"hush-viewer\"").unwrap() < html.find("Tables 8.1–8.3").unwrap(), "the viewer first");
+    assert!(!html.contains(&repo().display().to_string()), "no machine path in the page");
 }
 
 /// A second small scene for dataset tests: the Cornell box's meshes with a bluish light.
@@ -756,7 +771,8 @@ fn train_reads_a_toml_config_and_writes_metrics() {
     for f in ["checkpoints/epoch_0002.safetensors", "checkpoints/epoch_0004.safetensors", "best.safetensors"] {
         assert!(run.join(f).is_file(), "{f}");
     }
-    assert!(std::fs::read(run.join("loss-train_blue-test_red.png")).unwrap().starts_with(b"\x89PNG"));
+    let plot = std::fs::read_to_string(run.join("loss.svg")).unwrap();
+    assert!(plot.starts_with("<svg") && plot.contains(">epoch</text>"), "{plot}");
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(run.join("summary.json")).unwrap()).unwrap();
     assert!(summary["steps_per_second"].as_f64().unwrap() > 0.0);

@@ -3,9 +3,11 @@
 //! baseline hush knows (`--baseline all`), into `target/eval/`. `--dataset DIR --model FILE` evaluate another
 //! dataset and model instead, `--out DIR` writes elsewhere.
 //!
-//! `--check-html` then renders `report.html` in headless Chromium (installed with apt-get when missing and
-//! run as root) through hush-eval's `html_renders_in_chromium` test: no console or network errors, the report
-//! in the DOM, a screenshot that is not blank.
+//! `--check-html` then opens `report.html` in headless Chromium (installed with apt-get when missing and
+//! run as root) through hush-eval's `html_renders_in_chromium` test, which drives the image comparison with
+//! real key, mouse and wheel events (over the DevTools protocol) on synthetic reports whose pixels it knows,
+//! and on this report checks that it loads with no request but its own file, no console error, plots with
+//! axis titles and legends, a viewer that flips, and a screenshot that is not blank.
 
 use std::path::PathBuf;
 use std::process::Command;
@@ -62,7 +64,7 @@ pub fn run(args: &[String]) -> Result<()> {
 
 /// Runs hush-eval's Chromium test on `html`, installing Chromium first where it is missing and we may.
 fn check_html(html: &std::path::Path) -> Result<()> {
-    let has_chromium = Command::new("chromium").arg("--version").output().is_ok_and(|o| o.status.success());
+    let has_chromium = has_chromium();
     if !has_chromium {
         if is_root() && std::path::Path::new("/usr/bin/apt-get").exists() {
             eprintln!("xtask: Chromium is missing; installing it: {CHROMIUM_INSTALL}");
@@ -72,15 +74,18 @@ fn check_html(html: &std::path::Path) -> Result<()> {
             return Err(format!("--check-html needs Chromium: install it, e.g. `sudo {CHROMIUM_INSTALL}`"));
         }
     }
-    spawn(Command::new(cargo()).current_dir(project_root()).env("HUSH_CHROMIUM_HTML", html).args([
-        "test",
-        "-p",
-        "hush-eval",
-        "--test",
-        "it",
-        "html_renders_in_chromium",
-        "--",
-        "--ignored",
-        "--nocapture",
-    ]))
+    spawn(browser_test().env("HUSH_CHROMIUM_HTML", html))
+}
+
+/// Whether Chromium is installed.
+pub fn has_chromium() -> bool {
+    Command::new("chromium").arg("--version").output().is_ok_and(|o| o.status.success())
+}
+
+/// hush-eval's Chromium test (ignored by default) as a cargo command.
+pub fn browser_test() -> Command {
+    let mut c = Command::new(cargo());
+    c.current_dir(project_root()).args(["test", "-p", "hush-eval", "--test", "it", "html_renders_in_chromium"]);
+    c.args(["--", "--ignored", "--nocapture"]);
+    c
 }

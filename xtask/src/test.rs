@@ -1,6 +1,7 @@
 //! `cargo xtask test`: installs what a fresh machine lacks (a Vulkan driver), then runs every
-//! test of the workspace, then the thesis's sweeps at their tiny scale (a real dataset, training
-//! and evaluation of every sweep's runs, and the aggregate report), from scratch.
+//! test of the workspace, the browser test of `report.html` where Chromium is installed, then the thesis's
+//! sweeps at their tiny scale (a real dataset, training and evaluation of every sweep's runs, and the
+//! aggregate report), from scratch.
 
 use std::process::Command;
 
@@ -20,6 +21,14 @@ pub fn run(args: &[String]) -> Result<()> {
     if !args.is_empty() {
         // A filtered test run (`cargo xtask test <filter>`) is not the whole suite.
         return Ok(());
+    }
+    // The report's page in a real browser, where one is installed (`cargo xtask eval --check-html` installs it).
+    if crate::eval::has_chromium() {
+        spawn(&mut crate::eval::browser_test())?;
+    } else {
+        eprintln!(
+            "xtask: Chromium is not installed: the browser test of report.html is left out (`apt-get install -y chromium`, or `cargo xtask eval --check-html`)"
+        );
     }
     let out = target_dir().join("test-sweeps");
     if out.exists() {

@@ -165,7 +165,7 @@ fn run_baseline_with(
             reason: format!(
                 "{}: the baselines venv is not installed ({} not found)",
                 baseline.name(),
-                python.display()
+                crate::shown_path(python)
             ),
             install: INSTALL,
         });
@@ -220,7 +220,7 @@ fn run_baseline_with(
             reason: format!(
                 "{}: the Python package `{missing}` is not installed in {}",
                 baseline.name(),
-                python.display()
+                crate::shown_path(python)
             ),
             install: INSTALL,
         });

@@ -1,35 +1,26 @@
-//! `report.html`: the report as one self-contained page. Every image (plots, crops, difference pictures) is
-//! inlined as a base64 `data:` URI; there are no scripts, no external style sheets and no links to load.
-//! All text goes through [`escape_html`].
+//! `report.html`: the report as one self-contained page. Plots are inline SVG, pictures (crops, difference
+//! pictures) base64 `data:` URIs, the image comparison's HDR data base64 in the page with its script
+//! ([`crate::viewer`]); there are no external scripts, style sheets or links to load. All text goes through
+//! [`escape_html`].
 
 use std::fmt::Write as _;
 use std::path::Path;
 
 use crate::doc::{Block, Document, Grid, Inline, Text};
-use crate::report::{CONVENTIONS, REFERENCE, TRADEOFF_INTRO};
+use crate::report::{CONVENTIONS, TRADEOFF_INTRO};
 use crate::tradeoff::ErrorMetric;
 use crate::{Error, Report, Result};
 
 const STYLE: &str = "body{font-family:sans-serif;max-width:1150px;margin:1em auto;padding:0 1em;color:#222}\
 table{border-collapse:collapse;margin:0.5em 0 1.5em}td,th{border:1px solid #ccc;padding:2px 6px}\
 td.n{text-align:right;font-variant-numeric:tabular-nums}th{background:#f2f2f2}\
-figure{display:inline-block;margin:4px;text-align:center}img{image-rendering:pixelated;max-width:100%}\
+figure{display:inline-block;margin:4px;text-align:center}ul.headline{font-size:105%}.plot svg{max-width:100%;height:auto}img{image-rendering:pixelated;max-width:100%}\
 .swatch{display:inline-block;width:1.2em;height:0.8em;vertical-align:middle}p.small{font-size:90%;color:#555}";
 
-/// Escapes `&`, `<`, `>`, `"` and `'` for HTML text and attribute values.
+/// Escapes `&`, `<`, `>`, `"` and `'` for HTML text and attribute values (the same rules as the SVG of
+/// [`hush_plot`], which the page inlines).
 pub fn escape_html(s: &str) -> String {
-    let mut out = String::with_capacity(s.len());
-    for c in s.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            '\'' => out.push_str("&#39;"),
-            c => out.push(c),
-        }
-    }
-    out
+    hush_plot::xml(s)
 }
 
 /// Standard base64 (RFC 4648, with padding).
@@ -50,14 +41,22 @@ pub fn base64(bytes: &[u8]) -> String {
     out
 }
 
-/// A PNG file of the report directory as an `<img>` with a data URI.
+/// An image file of the report directory, inline: an SVG as its markup (its text stays text), anything else
+/// (PNG) as an `<img>` with a data URI.
 fn img(dir: &Path, path: &str, alt: &str) -> Result<String> {
     let file = dir.join(path);
-    let bytes = std::fs::read(&file).map_err(|source| Error::File {
-        path: file.clone(),
-        action: "read for report.html",
-        source,
-    })?;
+    let read_error = |source| Error::File { path: file.clone(), action: "read for report.html", source };
+    if path.ends_with(".svg") {
+        let svg = std::fs::read_to_string(&file).map_err(read_error)?;
+        // Inline SVG needs no namespace declaration (and the page then names no address at all).
+        let svg = svg.replacen(" xmlns=\"http://www.w3.org/2000/svg\"", "", 1);
+        return Ok(format!(
+            "<span class=\"plot\" role=\"img\" aria-label=\"{}\">{}</span>",
+            escape_html(alt),
+            svg.trim_end()
+        ));
+    }
+    let bytes = std::fs::read(&file).map_err(read_error)?;
     Ok(format!("<img alt=\"{}\" src=\"data:image/png;base64,{}\">", escape_html(alt), base64(&bytes)))
 }
 
@@ -65,72 +64,54 @@ fn img(dir: &Path, path: &str, alt: &str) -> Result<String> {
 fn head(title: &str) -> String {
     format!(
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{}</title>\
-         <style>{STYLE}</style></head><body>\n",
-        escape_html(title)
+         <style>{STYLE}{}</style></head><body>\n",
+        escape_html(title),
+        crate::viewer::STYLE
     )
 }
 
-/// The report as HTML; images named by the report are read from `dir` and inlined.
+/// The report as HTML; images named by the report are read from `dir` and inlined. In order: what was
+/// compared and the headline, the image comparison of each view, the thesis-style tables, the plots of
+/// error against time, the crops and difference pictures, then (collapsed) the conventions, notes, skipped
+/// methods, every row and every comparison.
 pub fn to_html(report: &Report, dir: &Path) -> Result<String> {
     let mut h = head("Denoising evaluation");
-    let _ = write!(h, "<h1>Denoising evaluation</h1>\n<p class=\"small\">{}</p>\n", escape_html(CONVENTIONS));
-    if !report.notes.is_empty() {
-        h.push_str("<ul>");
-        for n in &report.notes {
-            let _ = write!(h, "<li>{}</li>", escape_html(n));
+    let _ = writeln!(h, "<h1>Denoising evaluation</h1>\n<p>{}</p>", escape_html(&report.compared()));
+    let headlines = report.headlines();
+    if !headlines.is_empty() {
+        h.push_str("<ul class=\"headline\">");
+        for line in &headlines {
+            let _ = write!(h, "<li><b>{}</b></li>", escape_html(line));
         }
         h.push_str("</ul>\n");
     }
     if !report.skipped.is_empty() {
-        h.push_str("<h2>Skipped methods</h2><ul>");
-        for s in &report.skipped {
-            let install =
-                s.install.as_deref().map(|c| format!(" Install: <code>{}</code>", escape_html(c))).unwrap_or_default();
-            let _ = write!(h, "<li>{}: skipped: {}.{install}</li>", escape_html(&s.method), escape_html(&s.reason));
-        }
-        h.push_str("</ul>\n");
+        let names: Vec<String> = report.skipped.iter().map(|s| escape_html(&s.method)).collect();
+        let _ = writeln!(
+            h,
+            "<p class=\"small\">Not run: {} (why and how to install: under Details).</p>",
+            names.join(", ")
+        );
     }
-    for (title, t) in report.tables() {
+    if !report.viewers.is_empty() {
+        h.push_str("<h2>The images</h2>\n");
+        for (i, viewer) in report.viewers.iter().enumerate() {
+            h.push_str(&crate::viewer::to_html(report, viewer, dir, i)?);
+        }
+    }
+    for (title, t) in report.thesis_tables() {
         let _ = writeln!(h, "<h2>{}</h2>", escape_html(&title));
         grid(&mut h, &Grid::of_table(&t), dir)?;
     }
     let _ = writeln!(h, "<h2>Error against run time</h2>\n<p>{}</p>", escape_html(TRADEOFF_INTRO));
-    let methods: Vec<&str> = report.methods().into_iter().filter(|m| *m != REFERENCE).collect();
     for metric in ErrorMetric::ALL {
-        let caption = match crate::plot::decades(&report.rows, &methods, metric) {
-            Some((x0, x1, y0, y1)) => format!(
-                "{} against seconds: x from 1e{x0} to 1e{x1} s, y from 1e{y0} to 1e{y1}, log-log",
-                metric.label()
-            ),
-            None => format!("{} against seconds: no point to plot", metric.label()),
-        };
-        let _ = writeln!(
-            h,
-            "<figure>{}<figcaption>{}</figcaption></figure>",
-            img(dir, &Report::plot_file(metric), &caption)?,
-            escape_html(&caption)
-        );
+        let alt = format!("{} against seconds", metric.label());
+        let _ = writeln!(h, "<figure>{}</figure>", img(dir, &Report::plot_file(metric), &alt)?);
     }
-    h.push_str("<table><tr><th>color</th><th>method</th></tr>");
-    for (i, m) in methods.iter().enumerate() {
-        let (r, g, b) = crate::plot::series_color(i);
-        let _ = write!(
-            h,
-            "<tr><td><span class=swatch style=\"background:#{r:02x}{g:02x}{b:02x}\"></span></td><td>{}</td></tr>",
-            escape_html(m)
-        );
-    }
-    h.push_str("</table>\n");
     if let Some(t) = report.overview_table() {
         h.push_str("<p>Over the views:</p>");
         grid(&mut h, &Grid::of_table(&t), dir)?;
-        h.push_str("<p>Per view:</p>");
     }
-    h.push_str("<ul>");
-    for c in report.tradeoff() {
-        let _ = write!(h, "<li>{}</li>", escape_html(&c.sentence()));
-    }
-    h.push_str("</ul>\n");
     for figure in &report.figures {
         let _ = write!(h, "<h2>{}</h2>\n<div>", escape_html(&figure.title));
         for image in &figure.images {
@@ -145,6 +126,42 @@ pub fn to_html(report: &Report, dir: &Path) -> Result<String> {
         if !figure.note.is_empty() {
             let _ = writeln!(h, "<p class=\"small\">{}</p>", escape_html(&figure.note));
         }
+    }
+    h.push_str(
+        "<details><summary><h2 style=\"display:inline\">Details: conventions, notes, every row</h2></summary>\n",
+    );
+    let _ = writeln!(h, "<h3>Conventions</h3><p class=\"small\">{}</p>", escape_html(CONVENTIONS));
+    if !report.notes.is_empty() {
+        h.push_str("<h3>Notes</h3><ul>");
+        for n in &report.notes {
+            let _ = write!(h, "<li>{}</li>", escape_html(n));
+        }
+        h.push_str("</ul>\n");
+    }
+    if !report.skipped.is_empty() {
+        h.push_str("<h3>Skipped methods</h3><ul>");
+        for s in &report.skipped {
+            let install =
+                s.install.as_deref().map(|c| format!(" Install: <code>{}</code>", escape_html(c))).unwrap_or_default();
+            let _ = write!(h, "<li>{}: skipped: {}.{install}</li>", escape_html(&s.method), escape_html(&s.reason));
+        }
+        h.push_str("</ul>\n");
+    }
+    for (title, t) in report.detail_tables() {
+        let _ = writeln!(h, "<h3>{}</h3>", escape_html(&title));
+        grid(&mut h, &Grid::of_table(&t), dir)?;
+    }
+    let comparisons = report.tradeoff();
+    if !comparisons.is_empty() {
+        h.push_str("<h3>Error against run time, per view</h3><ul>");
+        for c in comparisons {
+            let _ = write!(h, "<li>{}</li>", escape_html(&c.sentence()));
+        }
+        h.push_str("</ul>\n");
+    }
+    h.push_str("</details>\n");
+    if !report.viewers.is_empty() {
+        let _ = writeln!(h, "<script>{}</script>", crate::viewer::SCRIPT);
     }
     h.push_str("</body></html>\n");
     Ok(h)

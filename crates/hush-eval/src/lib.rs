@@ -40,13 +40,17 @@ pub mod sweep;
 mod timing;
 mod tonemap;
 pub mod tradeoff;
+pub mod viewer;
 
 pub use error::{Error, Result};
 pub use metrics::{
     MS_SSIM_MIN_SIDE, Metrics, color_shift, compare, mae, ms_ssim_tonemapped, mse, psnr, psnr_of_mse, rel_mse, ssim,
     ssim_tonemapped,
 };
-pub use plot::{plot_error_vs_time, plot_lines, series_color};
-pub use report::{CONVENTIONS, Figure, FigureImage, FigureKind, NOISY, REFERENCE, Report, Row, SCHEMA, Skipped, Table};
+pub use plot::{error_vs_time_chart, metric_axis, plot_error_vs_time, series_color};
+pub use report::{
+    CONVENTIONS, Figure, FigureImage, FigureKind, NOISY, REFERENCE, Report, Row, SCHEMA, Skipped, Table, shown_path,
+};
 pub use timing::{Timing, time_median};
 pub use tonemap::{exposure_of, filmic, tonemap};
+pub use viewer::{Viewer, ViewerImage};

@@ -1,7 +1,7 @@
 //! Result tables: `report.md` and a self-contained `report.html` for people, `summary.json` and
 //! `error_vs_time.csv` for scripts, and the error-against-time plots.
 //!
-//! # `summary.json` (schema 3)
+//! # `summary.json` (schema 4)
 //!
 //! Field names are stable; a change that breaks readers bumps `schema`.
 //!
@@ -43,10 +43,16 @@
 //!     "images": [{"caption": ..., "path": "pictures/....png",
 //!                 "method": "noisy" | ... ,                        // absent outside figures of methods
 //!                 "marks": {"over_low": 0.12, "over_high": 0.01}}] // difference pictures only
+//!   }],
+//!   "viewers": [{                 // the image comparison of report.html, one per test view
+//!     "view": "cbox_v005", "spp": 16, "width": 96, "height": 96,
+//!     "exposure": 1.7,            // the evaluation tonemap's exposure (EV 0 in the page)
+//!     "images": [{"method": "noisy", "path": "pictures/....rgbh.zz"}, ..., {"method": "reference", ...}]
 //!   }]
 //! }
 //! ```
 //!
+//! Schema 4 added `viewers` (see [`crate::viewer`]); older summaries read back without them.
 //! Schema 3 added the figures' `kind` and their images' `method` and `marks`; a schema-2 summary reads back
 //! with every figure of kind `other`.
 //!
@@ -58,13 +64,14 @@ use std::path::Path;
 use hush_dataset::write_atomic;
 use serde::{Deserialize, Deserializer, Serialize};
 
-use crate::doc::{Block, Document, Grid, image, text};
+use crate::doc::{Block, Grid, image, text};
 use crate::pictures::Marks;
 use crate::tradeoff::{self, Comparison, ErrorMetric};
+use crate::viewer::Viewer;
 use crate::{Error, Metrics, Result};
 
 /// The version of `summary.json`'s layout.
-pub const SCHEMA: u32 = 3;
+pub const SCHEMA: u32 = 4;
 
 /// How the numbers in a report were computed; written at the top of `report.md` and into `summary.json`.
 pub const CONVENTIONS: &str = "\
@@ -233,6 +240,9 @@ pub struct Report {
     pub skipped: Vec<Skipped>,
     #[serde(default)]
     pub figures: Vec<Figure>,
+    /// The image comparisons of `report.html`, one per view (files written by [`Viewer::write`]).
+    #[serde(default)]
+    pub viewers: Vec<Viewer>,
 }
 
 #[derive(Serialize)]
@@ -245,6 +255,7 @@ struct Summary<'a> {
     tradeoff: &'a [Comparison],
     tradeoff_overview: &'a [tradeoff::Overview],
     figures: &'a [Figure],
+    viewers: &'a [Viewer],
 }
 
 impl Report {
@@ -253,9 +264,9 @@ impl Report {
     pub const JSON_FILE: &'static str = "summary.json";
     pub const CSV_FILE: &'static str = "error_vs_time.csv";
 
-    /// The plot file of one error metric, e.g. `error_vs_time_rel_mse.png`.
+    /// The plot file of one error metric, e.g. `error_vs_time_rel_mse.svg`.
     pub fn plot_file(metric: ErrorMetric) -> String {
-        format!("error_vs_time_{}.png", metric.key())
+        format!("error_vs_time_{}.svg", metric.key())
     }
 
     /// Views in order of first appearance.
@@ -273,6 +284,66 @@ impl Report {
         tradeoff::compare_to_raw(&self.rows)
     }
 
+    /// What the report compares, in one sentence: the views, the methods, the input spp and the references'.
+    pub fn compared(&self) -> String {
+        let views = self.views();
+        let shown: Vec<&str> = views.iter().take(6).copied().collect();
+        let more =
+            if views.len() > shown.len() { format!(" and {} more", views.len() - shown.len()) } else { String::new() };
+        let methods: Vec<&str> = self.methods().into_iter().filter(|m| *m != NOISY && *m != REFERENCE).collect();
+        let mut spp: Vec<u32> = self.rows.iter().filter(|r| r.is_noisy()).map(|r| r.spp).collect();
+        spp.sort_unstable();
+        spp.dedup();
+        let mut ref_spp: Vec<u32> = self.rows.iter().filter(|r| r.method == REFERENCE).map(|r| r.spp).collect();
+        ref_spp.sort_unstable();
+        ref_spp.dedup();
+        let list = |v: &[u32]| v.iter().map(u32::to_string).collect::<Vec<_>>().join(", ");
+        format!(
+            "{} test view{} ({}{more}); the noisy input at {} spp{}; against references of {} spp.",
+            views.len(),
+            if views.len() == 1 { "" } else { "s" },
+            shown.join(", "),
+            list(&spp),
+            if methods.is_empty() { String::new() } else { format!(" and denoised by {}", methods.join(", ")) },
+            list(&ref_spp)
+        )
+    }
+
+    /// The headline of each denoiser at the lowest spp it was given: how much raw path tracing it is worth
+    /// in relMSE (the median over the views of "reaches raw N spp's error in X % of its time"), and on how many
+    /// views raw path tracing does not reach its error within the ladder (or beats it at the lowest rung).
+    pub fn headlines(&self) -> Vec<String> {
+        let Some(spp) = self.table_spp() else { return Vec::new() };
+        let comparisons: Vec<Comparison> =
+            self.tradeoff().into_iter().filter(|c| c.spp == spp && c.metric == ErrorMetric::RelMse).collect();
+        let overview = tradeoff::overview(&comparisons);
+        overview
+            .iter()
+            .map(|o| {
+                let count = |status: &str| comparisons.iter().filter(|c| c.method == o.method && c.status == status).count();
+                let mut s = match (o.median_raw_spp, o.median_time_percent) {
+                    (Some(raw), Some(pct)) => {
+                        let over =
+                            if o.views == 1 { String::new() } else { format!(", the median over {} views", o.interpolated) };
+                        format!(
+                            "{} from {spp} spp reaches raw path tracing's relMSE at {raw:.0} spp in {pct:.1} % of its time{over}",
+                            o.method
+                        )
+                    }
+                    _ => format!("{} from {spp} spp", o.method),
+                };
+                let (below, above) = (count("below_ladder"), count("above_ladder"));
+                if below > 0 {
+                    s += &format!("; on {below} of {} views its relMSE is below raw path tracing's at the ladder's highest spp (not extrapolated)", o.views);
+                }
+                if above > 0 {
+                    s += &format!("; on {above} of {} views raw path tracing is better already at its lowest spp", o.views);
+                }
+                s + "."
+            })
+            .collect()
+    }
+
     /// The spp of the thesis-style tables and the pictures: the lowest spp a denoiser was evaluated at.
     pub fn table_spp(&self) -> Option<u32> {
         self.rows.iter().filter(|r| r.is_denoiser()).map(|r| r.spp).min()
@@ -282,6 +353,18 @@ impl Report {
     /// 8.1–8.3), every row per view, means over views, the error-against-time summary and plots, and figures.
     pub fn to_markdown(&self) -> String {
         let mut md = String::from("# Denoising evaluation\n\n");
+        let _ = writeln!(md, "{}\n", md_text(&self.compared()));
+        for line in self.headlines() {
+            let _ = writeln!(md, "- **{}**", md_text(&line));
+        }
+        if !self.viewers.is_empty() {
+            let _ = writeln!(
+                md,
+                "\nOpen `report.html` beside this file for the images: flip between the methods, split, zoom and \
+                 change the exposure."
+            );
+        }
+        md.push('\n');
         let _ = writeln!(md, "{CONVENTIONS}\n");
         for note in &self.notes {
             let _ = writeln!(md, "- {}", md_text(note));
@@ -308,7 +391,6 @@ impl Report {
         for metric in ErrorMetric::ALL {
             let _ = writeln!(md, "![{} against seconds]({})\n", metric.label(), Self::plot_file(metric));
         }
-        md.push_str(&self.legend_markdown());
         if let Some(table) = self.overview_table() {
             md.push_str("\nOver the views:\n\n");
             md.push_str(&table.to_markdown());
@@ -342,9 +424,15 @@ impl Report {
         md
     }
 
-    /// Every table of the report with its title: per view the thesis-style table at [`Self::table_spp`], per
-    /// view all rows, and with several views the means.
+    /// Every table of the report with its title: [`Self::thesis_tables`], then [`Self::detail_tables`].
     pub fn tables(&self) -> Vec<(String, Table)> {
+        let mut tables = self.thesis_tables();
+        tables.extend(self.detail_tables());
+        tables
+    }
+
+    /// Per view the thesis-style table at [`Self::table_spp`].
+    pub fn thesis_tables(&self) -> Vec<(String, Table)> {
         let mut tables = Vec::new();
         let views = self.views();
         if let Some(spp) = self.table_spp() {
@@ -356,6 +444,13 @@ impl Report {
                 }
             }
         }
+        tables
+    }
+
+    /// Per view all rows, and with several views the means.
+    pub fn detail_tables(&self) -> Vec<(String, Table)> {
+        let mut tables = Vec::new();
+        let views = self.views();
         for view in &views {
             let rows: Vec<&Row> = self.rows.iter().filter(|r| r.view == *view).collect();
             tables.push((format!("{view}: all rows"), Table::rows(&rows)));
@@ -379,24 +474,12 @@ impl Report {
         self.rows.iter().filter(|r| r.view == view && r.spp == spp && r.method != REFERENCE).collect()
     }
 
-    fn legend_markdown(&self) -> String {
-        let doc = Document { blocks: vec![Block::Table(self.legend())], ..Document::default() };
-        doc.to_markdown().trim_end_matches('\n').to_string() + "\n"
-    }
-
-    /// The plots' colors: per method but the reference, `#rrggbb`.
-    pub fn legend(&self) -> Grid {
-        let methods: Vec<&str> = self.methods().into_iter().filter(|m| *m != REFERENCE).collect();
-        legend(&methods)
-    }
-
-    /// The error-against-time section for a document: what it shows, the plots of [`Self::write_error_vs_time`],
-    /// their legend and the comparisons over the views.
+    /// The error-against-time section for a document: what it shows, the plots of [`Self::write_error_vs_time`]
+    /// (each with its legend) and the comparisons over the views.
     pub fn error_vs_time_blocks(&self) -> Vec<Block> {
         let mut blocks = vec![Block::Paragraph(text(TRADEOFF_INTRO))];
         let plots = ErrorMetric::ALL.map(|m| image(format!("{} against seconds", m.label()), Self::plot_file(m)));
         blocks.push(Block::Paragraph(plots.concat()));
-        blocks.push(Block::Table(self.legend()));
         if let Some(table) = self.overview_table() {
             blocks.push(Block::Paragraph(text("Over the views:")));
             blocks.push(Block::Table(Grid::of_table(&table)));
@@ -409,8 +492,8 @@ impl Report {
         write_file(&dir.join(Self::CSV_FILE), tradeoff::to_csv(&self.rows).as_bytes())?;
         let methods: Vec<&str> = self.methods().into_iter().filter(|m| *m != REFERENCE).collect();
         for metric in ErrorMetric::ALL {
-            let png = crate::plot::plot_error_vs_time(&self.rows, &methods, metric, 800, 560)?;
-            write_file(&dir.join(Self::plot_file(metric)), &png)?;
+            let svg = crate::plot::plot_error_vs_time(&self.rows, &methods, metric, 800, 560);
+            write_file(&dir.join(Self::plot_file(metric)), svg.as_bytes())?;
         }
         Ok(())
     }
@@ -465,6 +548,7 @@ impl Report {
             tradeoff: &tradeoff,
             tradeoff_overview: &overview,
             figures: &self.figures,
+            viewers: &self.viewers,
         };
         // Only strings and numbers (non-finite numbers become null): this cannot fail.
         let mut text = serde_json::to_string_pretty(&summary).expect("a report serializes to JSON");
@@ -490,23 +574,26 @@ impl Report {
     }
 }
 
-/// The colors of `methods` in plots (color `i` for `methods[i]`), `#rrggbb`.
-pub fn legend(methods: &[&str]) -> Grid {
-    let mut g = Grid::new(vec!["color".into(), "method".into()], vec![false, false]);
-    for (i, method) in methods.iter().enumerate() {
-        let (r, g_, b) = crate::plot::series_color(i);
-        g.rows.push(vec![text(format!("#{r:02x}{g_:02x}{b:02x}")), text(*method)]);
-    }
-    g
-}
-
 /// What the error-against-time section shows.
 pub const TRADEOFF_INTRO: &str = "\
 For each test view, error against seconds on log-log axes: raw path tracing along the spp ladder (render \
-seconds), and each denoiser at each input spp (render seconds of its input + denoise seconds). Grid lines mark \
-powers of ten, labelled 1e-2 etc. A denoiser \"reaches the error of raw N spp in X % of its time\" when raw path tracing needs \
+seconds), and each denoiser at each input spp (render seconds of its input + denoise seconds). A denoiser \"reaches the error of raw N spp in X % of its time\" when raw path tracing needs \
 N spp (interpolated) to reach the denoiser's error and the denoiser costs X % of that time; equal time gives raw \
 path tracing's error after the denoiser's seconds.";
+
+/// A path as a report shows it, without the machine's folders: relative to the working directory when it
+/// lies under it, else its last three components after `…/`.
+pub fn shown_path(path: &Path) -> String {
+    let absolute = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    if let Ok(cwd) = std::env::current_dir()
+        && let Ok(rel) = absolute.strip_prefix(&cwd)
+    {
+        return if rel.as_os_str().is_empty() { ".".into() } else { rel.display().to_string() };
+    }
+    let parts: Vec<_> = absolute.components().rev().take(3).collect();
+    let tail: std::path::PathBuf = parts.into_iter().rev().collect();
+    format!("…/{}", tail.display())
+}
 
 /// Writes bytes to `path` atomically.
 pub(crate) fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {

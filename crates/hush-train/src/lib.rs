@@ -14,7 +14,7 @@
 //!   [`read_train_state`] reads where a checkpoint stands.
 //! * [`encode_samples`] / [`decode_samples`]: prepared samples as f16 bytes under a key with a checksum, for
 //!   an on-disk cache that a change of data or settings invalidates.
-//! * [`plot_losses`]: a PNG of the training and test loss curves.
+//! * [`plot_losses`]: an SVG chart of the training and test loss curves.
 //!
 //! ```
 //! use std::ops::ControlFlow;

@@ -1,6 +1,6 @@
 //! The aggregate of a sweep: `report.md` and `report.html` with a table per run, metrics per spp, previews,
 //! crops and difference pictures, hush-eval's error-against-time view (`error_vs_time.csv`,
-//! `error_vs_time_<metric>.png`), the loss curves (`curves.csv`, `train_loss.png`, `test_loss.png`) and the
+//! `error_vs_time_<metric>.svg`), the loss curves (`curves.csv`, `train_loss.svg`, `test_loss.svg`) and the
 //! thesis's claims.
 
 use std::collections::BTreeSet;
@@ -14,7 +14,7 @@ use crate::report::write_file;
 use crate::{Error, NOISY, Report, Result};
 
 /// The loss-curve plots: file and what they show.
-pub const LOSS_PLOTS: [(&str, &str); 2] = [("train_loss.png", "training loss"), ("test_loss.png", "test loss")];
+pub const LOSS_PLOTS: [(&str, &str); 2] = [("train_loss.svg", "training loss"), ("test_loss.svg", "test loss")];
 
 fn opt(v: Option<f64>, digits: usize) -> String {
     v.filter(|x| x.is_finite()).map_or("–".into(), |x| format!("{x:.digits$}"))
@@ -318,13 +318,22 @@ fn curves_section(doc: &mut Document, done: &[&RunResult], dir: &Path) -> Result
         if series.iter().all(Vec::is_empty) {
             continue;
         }
-        write_file(&dir.join(file), &crate::plot::plot_lines(&series, 720, 420)?)?;
+        let chart = hush_plot::Chart {
+            title: format!("The {title} of each run"),
+            x: hush_plot::Axis::linear("epoch"),
+            y: hush_plot::Axis::log("loss (the run's training loss)"),
+            series: done
+                .iter()
+                .zip(series)
+                .enumerate()
+                .map(|(i, (r, points))| hush_plot::Series::line(&r.run.name, crate::plot::series_color(i), points))
+                .collect(),
+        };
+        write_file(&dir.join(file), chart.to_svg(720, 420).as_bytes())?;
         plots.extend(image(title, file));
     }
     if !plots.is_empty() {
         doc.push(Block::Paragraph(plots));
-        let names: Vec<&str> = done.iter().map(|r| r.run.name.as_str()).collect();
-        doc.push(Block::Table(crate::report::legend(&names)));
     }
     // A compact table of the test loss at up to 12 evaluated epochs.
     let epochs: BTreeSet<usize> =

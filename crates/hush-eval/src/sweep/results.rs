@@ -1,5 +1,5 @@
 //! What a run left behind: `train/metrics.csv` (loss per epoch, read by hush-train's own reader) and
-//! `eval/summary.json` (deserialized: schema 1 with `seconds`, schemas 2 and 3 with `render_seconds` and
+//! `eval/summary.json` (deserialized: schema 1 with `seconds`, schemas 2 to 4 with `render_seconds` and
 //! `denoise_seconds`; the crops and difference pictures found by their figure's [`FigureKind`]).
 
 use std::path::Path;

@@ -1,5 +1,6 @@
 //! Integration tests of hush-eval (one binary, modules by topic).
 
+mod browser;
 mod external;
 mod flip;
 mod golden;

@@ -41,6 +41,7 @@ pub fn report() -> Report {
             install: Some("cargo xtask eval --setup".into()),
         }],
         figures: vec![],
+        viewers: vec![],
     }
 }
 
@@ -98,8 +99,8 @@ fn write_creates_every_file_and_json_that_reads_back() {
         files,
         [
             "error_vs_time.csv",
-            "error_vs_time_one_minus_ssim.png",
-            "error_vs_time_rel_mse.png",
+            "error_vs_time_one_minus_ssim.svg",
+            "error_vs_time_rel_mse.svg",
             "report.html",
             "report.md",
             "summary.json"
@@ -133,19 +134,19 @@ fn a_figure_whose_file_is_missing_is_an_error_naming_it() {
     assert!(err.contains("gone.png"), "{err}");
 }
 
-/// The plots: the given size, each method in its color, and labels (black) left of the plot area.
+/// The plots explain themselves: a title, axis titles with units, log axes said to be log, a legend of the
+/// methods that have points, each in its color.
 #[test]
-fn plots_draw_each_method_in_its_color_and_label_the_axes() {
+fn plots_have_titles_units_and_a_legend_in_the_figure() {
     let r = report();
     let methods = ["noisy", "hush|unet"];
-    let png =
-        hush_eval::plot_error_vs_time(&r.rows, &methods, hush_eval::tradeoff::ErrorMetric::RelMse, 400, 300).unwrap();
-    let picture = image::load_from_memory(&png).unwrap().to_rgb8();
-    assert_eq!(picture.dimensions(), (400, 300));
-    let has =
-        |c: (u8, u8, u8), x_max: u32| picture.enumerate_pixels().any(|(x, _, p)| x < x_max && p.0 == [c.0, c.1, c.2]);
-    assert!(has(hush_eval::series_color(1), 400), "the denoiser's dot");
-    assert!(has((0, 0, 0), 48), "the error axis labels");
+    let svg = hush_eval::plot_error_vs_time(&r.rows, &methods, hush_eval::tradeoff::ErrorMetric::RelMse, 400, 300);
+    assert!(svg.contains("viewBox=\"0 0 400 300\""), "{svg}");
+    assert_eq!(hush_plot::texts(&svg, "title"), ["relMSE against time, a line per view (2)"]);
+    assert_eq!(hush_plot::texts(&svg, "x-title"), ["render + denoise time (s) (log scale)"]);
+    assert_eq!(hush_plot::texts(&svg, "y-title"), ["relMSE (linear HDR, unitless) (log scale)"]);
+    assert_eq!(hush_plot::texts(&svg, "legend"), ["noisy", "hush|unet"]);
+    assert!(svg.contains(&hush_plot::hex(hush_eval::series_color(1))), "the denoiser's color");
 }
 
 /// A figure's kind and its images' methods and marks survive `summary.json`; a schema-2 figure has none.

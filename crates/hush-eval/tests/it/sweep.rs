@@ -167,8 +167,8 @@ fn a_report_with_a_missing_run() {
     assert!(md.contains("| oidn | `` | 1 | 3.00 | 0.5000 | 0.6000 | 0.6000 (1) | 0.1000 | 25.00 | 0.5000 |"), "{md}");
     assert!(md.contains("| 4 | oidn | 2.00 | 0.500 | 2.50 | 25.00 |"), "{md}");
     assert!(md.contains("| 4 | noisy | 2.00 | – | 2.00 | 20.00 |"), "{md}");
-    assert!(dir.join("error_vs_time_rel_mse.png").is_file() && dir.join("error_vs_time.csv").is_file());
-    assert!(md.contains("](error_vs_time_one_minus_ssim.png)"), "{md}");
+    assert!(dir.join("error_vs_time_rel_mse.svg").is_file() && dir.join("error_vs_time.csv").is_file());
+    assert!(md.contains("](error_vs_time_one_minus_ssim.svg)"), "{md}");
     assert!(md.contains("| noisy | 20.00 / 0.5000 |"));
     assert!(
         md.contains("| ![noisy](oidn/eval/previews/noisy.png) | ![oidn](oidn/eval/previews/train/model.png) |"),
@@ -188,13 +188,17 @@ fn a_report_with_a_missing_run() {
     );
     assert_eq!(claims[0].verdict, Verdict::NotMeasured);
     assert!(md.contains("not measured"));
-    assert!(dir.join("curves.csv").is_file() && dir.join("test_loss.png").is_file());
+    assert!(dir.join("curves.csv").is_file());
+    let loss = std::fs::read_to_string(dir.join("test_loss.svg")).unwrap();
+    assert_eq!(hush_plot::texts(&loss, "title"), ["The test loss of each run"]);
+    assert_eq!(hush_plot::texts(&loss, "x-title"), ["epoch"]);
     let page = std::fs::read_to_string(dir.join("report.html")).unwrap();
     assert!(page.contains("<h1>Sweep <code>architecture</code> at scale <code>tiny</code></h1>"), "{page}");
     assert!(page.contains("<th>run</th><th>other flags</th>"));
     assert!(page.contains("<td><img alt=\"oidn\" src=\"data:image/png;base64,"), "{page}");
     assert!(!page.contains("|---"));
     assert_eq!(page.matches("<img ").count(), page.matches("src=\"data:image/png;base64,").count(), "all inline");
+    assert!(page.contains("<text class=\"title\"") && !page.contains("http:"), "the plots inline, as SVG");
 }
 
 #[test]
@@ -229,23 +233,6 @@ fn a_document_as_markdown_and_html() {
     let missing = Document { blocks: vec![Block::Paragraph(image("gone", "gone.png"))], ..doc };
     let err = hush_eval::html::document_to_html(&missing, tmp.path()).unwrap_err().to_string();
     assert!(err.contains("gone.png"), "{err}");
-}
-
-/// The loss plot: one color per series, nothing drawn for points it cannot place on a log scale.
-#[test]
-fn a_line_chart_has_a_color_per_series() {
-    let series = vec![vec![(1.0, 0.5), (2.0, 0.25), (3.0, 0.2)], vec![(2.0, 0.3)]];
-    let png = hush_eval::plot_lines(&series, 320, 200).unwrap();
-    let img = image::load_from_memory(&png).unwrap().to_rgb8();
-    assert_eq!(img.dimensions(), (320, 200));
-    for i in 0..2 {
-        let (r, g, b) = hush_eval::series_color(i);
-        assert!(img.pixels().any(|p| p.0 == [r, g, b]), "series {i} is drawn");
-    }
-    let empty = hush_eval::plot_lines(&[vec![(1.0, f64::NAN), (2.0, -1.0)]], 320, 200).unwrap();
-    let img = image::load_from_memory(&empty).unwrap().to_rgb8();
-    let (r, g, b) = hush_eval::series_color(1);
-    assert!(!img.pixels().any(|p| p.0 == [r, g, b]));
 }
 
 /// A plan read from JSON: runs' reports and the `all` report; the links of `all` go to the sweeps' reports.

@@ -12,7 +12,8 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use hush_dataset::{AuxSource, Image, Manifest, Split, load_view, write_png_preview};
-use hush_eval::{REFERENCE, Report, Row, compare, exposure_of};
+use hush_eval::viewer::file_safe;
+use hush_eval::{REFERENCE, Report, Row, Viewer, compare, exposure_of};
 
 pub use denoiser::{Denoiser, aux_of};
 pub use methods::{BASELINES, Method, Model, Run, baseline, method_name};
@@ -20,7 +21,7 @@ pub use methods::{BASELINES, Method, Model, Run, baseline, method_name};
 use crate::Observer;
 use crate::official::{OIDN_VERSION, official_for};
 use methods::Noisy;
-use pictures::{file_safe, pictures_of};
+use pictures::pictures_of;
 
 /// What to evaluate: every option of `hush eval`.
 #[derive(Clone, Debug, PartialEq)]
@@ -125,7 +126,7 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
         0,
         format!(
             "Dataset: {}; test views: {}; auxiliary inputs: {} (`--aux {}`).",
-            plan.dataset.display(),
+            hush_eval::shown_path(&plan.dataset),
             views.len(),
             plan.aux.describe(),
             plan.aux
@@ -193,6 +194,7 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
             }
             if spp == picture_spp {
                 report.figures.extend(pictures_of(&picture_dir, &name, spp, &outputs, &images.reference, exposure)?);
+                report.viewers.push(Viewer::write(&plan.out, &name, spp, &outputs, &images.reference, exposure)?);
             }
         }
     }

@@ -6,6 +6,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use hush_dataset::{Image, write_atomic};
 use hush_eval::pictures::{self, Rgb8};
+use hush_eval::viewer::file_safe;
 use hush_eval::{Figure, FigureImage, FigureKind, NOISY, REFERENCE};
 
 /// The crops side by side (each output, then the reference) and the difference pictures of one view,
@@ -66,9 +67,4 @@ pub(crate) fn pictures_of(
                 .into(),
         },
     ])
-}
-
-/// A method name as part of a file name: `/` and other unsafe characters become `-`.
-pub(crate) fn file_safe(method: &str) -> String {
-    method.chars().map(|c| if c.is_ascii_alphanumeric() || "._-".contains(c) { c } else { '-' }).collect()
 }

@@ -6,7 +6,7 @@
 //! RUN/checkpoints/last.safetensors   the resume point: weights, optimizer and training state
 //! RUN/checkpoints/epoch_NNNN.safetensors, RUN/best.safetensors, RUN/model.safetensors (the final weights)
 //! RUN/last_good.safetensors          the weights from before a step that diverged
-//! RUN/summary.json, RUN/loss-train_blue-test_red.png
+//! RUN/summary.json, RUN/loss.svg
 //! ```
 
 use std::path::{Path, PathBuf};
@@ -31,7 +31,7 @@ pub struct RunFolder {
 }
 
 impl RunFolder {
-    pub const LOSS_PLOT: &'static str = "loss-train_blue-test_red.png";
+    pub const LOSS_PLOT: &'static str = "loss.svg";
 
     pub fn new(dir: impl Into<PathBuf>) -> Self {
         RunFolder { dir: dir.into() }
@@ -165,8 +165,7 @@ pub(crate) fn save_epoch(
     write_file(&folder.metrics_csv(), metrics_csv(metrics).as_bytes())?;
     if row.test_loss.is_some() {
         write_file(&folder.epoch_checkpoint(row.epoch), bytes)?;
-        let png = plot_losses(metrics, 800, 500).map_err(anyhow::Error::msg)?;
-        write_file(&folder.loss_plot(), &png)?;
+        write_file(&folder.loss_plot(), plot_losses(metrics, 800, 500).as_bytes())?;
     }
     if row.best {
         write_file(&folder.best(), bytes)?;

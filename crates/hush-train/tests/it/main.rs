@@ -204,8 +204,10 @@ fn epochs_report_metrics_and_checkpoints() {
         assert_eq!(state.config, cfg);
     }
     assert_eq!(read_train_state(&trained.weights).unwrap(), None, "the final weights are a plain model");
-    let png = plot_losses(&rows, 320, 200).unwrap();
-    assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+    let svg = plot_losses(&rows, 320, 200);
+    assert_eq!(hush_plot::texts(&svg, "legend"), ["training loss (epoch mean)", "test loss"]);
+    assert_eq!(hush_plot::texts(&svg, "x-title"), ["epoch"]);
+    assert!(hush_plot::texts(&svg, "y-title")[0].ends_with("(log scale)"));
 }
 
 /// Resuming from a mid-run checkpoint continues exactly: the same losses, step for step, and the same
