@@ -141,8 +141,53 @@ impl ExrImage {
     }
 }
 
+/// The most samples (pixels × channels, summed over an EXR file's parts) hush decodes from one file unless
+/// `HUSH_MAX_EXR_SAMPLES` says otherwise: 2^29, i.e. 2 GiB as f32, a 16384×8192 RGBA environment map.
+pub const MAX_EXR_SAMPLES: u64 = 1 << 29;
+
+/// [`MAX_EXR_SAMPLES`], or the value of `HUSH_MAX_EXR_SAMPLES` where it is set to a number.
+pub fn max_exr_samples() -> u64 {
+    std::env::var("HUSH_MAX_EXR_SAMPLES").ok().and_then(|v| v.trim().parse().ok()).unwrap_or(MAX_EXR_SAMPLES)
+}
+
+/// The samples an EXR file's header declares (pixels × channels over every part), read without decoding any
+/// pixel; refused with an error naming the file and the limit when above [`max_exr_samples`]. The decoder
+/// allocates every channel from the header alone, so a file of a few hundred bytes can otherwise ask for
+/// tens of gigabytes.
+pub fn check_exr_header(path: &Path) -> Result<u64> {
+    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|source| Error::Exr {
+        path: path.to_path_buf(),
+        action: "reading the header of",
+        source,
+    })?;
+    let mut samples: u64 = 0;
+    for header in &meta.headers {
+        let (w, h) = (header.layer_size.width() as u64, header.layer_size.height() as u64);
+        let part = w.saturating_mul(h).saturating_mul(header.channels.list.len() as u64);
+        samples = samples.saturating_add(part);
+    }
+    let max = max_exr_samples();
+    if samples > max {
+        let sizes: Vec<String> = meta
+            .headers
+            .iter()
+            .map(|h| {
+                format!("{}x{} with {} channels", h.layer_size.width(), h.layer_size.height(), h.channels.list.len())
+            })
+            .collect();
+        return Err(Error::Shape(format!(
+            "{}: the EXR header declares {} ({samples} samples), above hush's limit of {max}; refused before \
+             decoding. If the image is real, raise the limit with HUSH_MAX_EXR_SAMPLES=<samples>",
+            path.display(),
+            sizes.join(", ")
+        )));
+    }
+    Ok(samples)
+}
+
 /// Reads every channel of every part of an EXR file (half, float and uint samples become f32). In a
 /// multi-part file, the channels of a named part `n` are keyed `n.<channel>`; all parts must have the same size.
+/// A header that declares more than [`max_exr_samples`] is refused before anything is decoded.
 pub fn read_exr(path: impl AsRef<Path>) -> Result<ExrImage> {
     let path = path.as_ref();
     if !path.is_file() {
@@ -152,6 +197,7 @@ pub fn read_exr(path: impl AsRef<Path>) -> Result<ExrImage> {
             std::io::Error::new(std::io::ErrorKind::NotFound, "no such file; check the path or re-create the dataset"),
         ));
     }
+    check_exr_header(path)?;
     let image = x::read()
         .no_deep_data()
         .largest_resolution_level()

@@ -43,7 +43,10 @@ mod validate;
 pub use atomic::write_atomic;
 pub use check::{CheckReport, check_dataset, check_image, link_or_copy, temp_files, temp_target};
 pub use error::{Error, Result};
-pub use exr_io::{ExrImage, channel_names, read_exr, read_rgb, write_exr, write_rgb};
+pub use exr_io::{
+    ExrImage, MAX_EXR_SAMPLES, channel_names, check_exr_header, max_exr_samples, read_exr, read_rgb, write_exr,
+    write_rgb,
+};
 pub use firefly::{DEFAULT_FIREFLY_FACTOR, DespeckleStats, despeckle, luminance};
 pub use image::Image;
 pub use layout::{AuxKind, AuxSource, Layout, ViewImages, load_view};

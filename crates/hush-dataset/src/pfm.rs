@@ -10,10 +10,29 @@ fn bad(path: &Path, what: String) -> Error {
     Error::Shape(format!("{}: not a PFM image: {what}", path.display()))
 }
 
-/// Reads an RGB (`PF`) or one-channel (`Pf`) PFM file, rows top first.
+/// Reads an RGB (`PF`) or one-channel (`Pf`) PFM file, rows top first. Only a regular file is read, and at
+/// most the bytes [`crate::max_exr_samples`] samples need (the limit every image reader of hush shares): a
+/// device, a pipe or an oversized file is refused, not read until memory runs out.
 pub fn read_pfm(path: impl AsRef<Path>) -> Result<Image> {
+    use std::io::Read as _;
     let path = path.as_ref();
-    let bytes = std::fs::read(path).map_err(|source| Error::File { path: path.into(), action: "read", source })?;
+    let io = |source| Error::File { path: path.into(), action: "read", source };
+    let meta = std::fs::metadata(path).map_err(io)?;
+    if !meta.is_file() {
+        return Err(bad(path, "it is not a regular file (a directory, a device or a pipe)".into()));
+    }
+    let max_samples = crate::max_exr_samples();
+    let limit = max_samples.saturating_mul(4).saturating_add(4096);
+    let mut bytes = Vec::new();
+    std::fs::File::open(path).and_then(|f| f.take(limit + 1).read_to_end(&mut bytes)).map_err(io)?;
+    if bytes.len() as u64 > limit {
+        return Err(bad(
+            path,
+            format!(
+                "it is larger than {limit} bytes, the most that {max_samples} samples need (HUSH_MAX_EXR_SAMPLES raises it)"
+            ),
+        ));
+    }
     // Three whitespace-separated header tokens after the magic, then exactly one whitespace byte.
     let mut pos = 0;
     let mut token = || -> Result<String> {
@@ -34,18 +53,30 @@ pub fn read_pfm(path: impl AsRef<Path>) -> Result<Image> {
         "Pf" => 1,
         other => return Err(bad(path, format!("magic {other:?}, expected \"PF\" or \"Pf\""))),
     };
-    let number =
-        |t: String, what: &str| t.parse::<f64>().map_err(|_| bad(path, format!("{what} {t:?} is not a number")));
-    let width = number(token()?, "width")?;
-    let height = number(token()?, "height")?;
-    let scale = number(token()?, "scale")?;
-    if !(width >= 1.0 && height >= 1.0 && width.fract() == 0.0 && height.fract() == 0.0) || scale == 0.0 {
-        return Err(bad(path, format!("size {width}×{height}, scale {scale}")));
+    let side = |t: String, what: &str| match t.parse::<u64>() {
+        Ok(v) if v >= 1 => Ok(v),
+        _ => Err(bad(path, format!("{what} {t:?} is not a whole number of at least 1"))),
+    };
+    let width = side(token()?, "width")?;
+    let height = side(token()?, "height")?;
+    let scale_token = token()?;
+    let scale = scale_token.parse::<f64>().unwrap_or(f64::NAN);
+    if !scale.is_finite() || scale == 0.0 {
+        return Err(bad(path, format!("scale {scale_token:?} is not a finite, non-zero number")));
+    }
+    let samples_declared = width.saturating_mul(height).saturating_mul(channels as u64);
+    if samples_declared > max_samples {
+        return Err(bad(
+            path,
+            format!(
+                "{width}×{height}×{channels} is above the limit of {max_samples} samples (HUSH_MAX_EXR_SAMPLES raises it)"
+            ),
+        ));
     }
     let (width, height) = (width as usize, height as usize);
     let data_start = pos + 1;
     let n = width * height * channels;
-    if bytes.len().saturating_sub(data_start) != 4 * n {
+    if data_start > bytes.len() || bytes.len() - data_start != 4 * n {
         return Err(bad(
             path,
             format!(

@@ -35,6 +35,12 @@ use crate::{
     Scene, SceneError, ShapeKind, named,
 };
 
+/// The longest attribute value `$variable` substitution may produce: any real scene's values are far shorter,
+/// and a file of `$a$a$a...` with a long default would otherwise grow quadratically.
+const MAX_SUBSTITUTED: usize = 64 * 1024;
+/// The deepest nesting of `<bsdf>` elements (real scenes nest two or three: twosided around a mask ...).
+const MAX_BSDF_NESTING: usize = 16;
+
 impl Scene {
     /// Parses Mitsuba XML text; `path` names the file in errors and anchors relative paths.
     pub fn from_mitsuba_str(text: &str, path: &Path) -> Result<Scene, SceneError> {
@@ -133,7 +139,7 @@ impl Parser<'_, '_> {
         Some(if self.legacy { snake_case(&raw) } else { raw })
     }
 
-    /// Replaces `$var` by the `<default>` values.
+    /// Replaces `$var` by the `<default>` values; the result may not grow beyond [`MAX_SUBSTITUTED`] bytes.
     fn substitute(&self, node: Node, value: &str) -> Result<String, SceneError> {
         if !value.contains('$') {
             return Ok(value.to_string());
@@ -152,6 +158,12 @@ impl Parser<'_, '_> {
                 )
             })?;
             out.push_str(v);
+            if out.len() > MAX_SUBSTITUTED {
+                return Err(self.err(
+                    node,
+                    format!("an attribute grows beyond {MAX_SUBSTITUTED} bytes as its $variables are replaced"),
+                ));
+            }
             rest = &after[len..];
         }
         out.push_str(rest);
@@ -770,6 +782,10 @@ impl Parser<'_, '_> {
     }
 
     fn bsdf(&mut self, node: Node) -> Result<Material, SceneError> {
+        // Nested BSDFs are read recursively: refuse what only a hostile file nests this deep.
+        if node.ancestors().filter(|a| a.is_element() && a.tag_name().name() == "bsdf").count() > MAX_BSDF_NESTING {
+            return Err(self.err(node, format!("BSDFs are nested more than {MAX_BSDF_NESTING} deep")));
+        }
         let ty = self.attr(node, "type")?;
         let ctx = format!("<bsdf type=\"{ty}\">");
         let rough = ty.starts_with("rough");

@@ -67,8 +67,24 @@ pub(crate) fn read_image(path: &Path, raw: bool) -> Result<Pixels, String> {
     Ok(pixels)
 }
 
+/// The most pixels of an EXR texture or environment map: 2^28 (a 16384² map is 2^28), as 3 f32 each 3 GiB.
+const MAX_EXR_PIXELS: u64 = 1 << 28;
+
 fn read_exr(path: &Path) -> Result<Pixels, String> {
     use exr::prelude::*;
+    // The decoder allocates from the header alone: check the declared size before decoding anything.
+    let meta = exr::meta::MetaData::read_from_file(path, false)
+        .map_err(|e| format!("image {}: reading its EXR header failed: {e}", path.display()))?;
+    for header in &meta.headers {
+        let (w, h) = (header.layer_size.width() as u64, header.layer_size.height() as u64);
+        if w.saturating_mul(h) > MAX_EXR_PIXELS {
+            return Err(format!(
+                "image {}: its EXR header declares {w}x{h} pixels, above the limit of {MAX_EXR_PIXELS} for a texture \
+                 or environment map; refused before decoding (resize the image)",
+                path.display()
+            ));
+        }
+    }
     let image = read_first_rgba_layer_from_file(
         path,
         |resolution, _| (resolution.width(), vec![0f32; resolution.width() * resolution.height() * 3]),

@@ -105,3 +105,25 @@ fn missing_file_names_the_path() {
     let err = read_exr("/nonexistent/dir/x.exr").unwrap_err().to_string();
     assert!(err.contains("/nonexistent/dir/x.exr"), "{err}");
 }
+
+/// An EXR file whose header claims a huge image (its data window patched to 65535×65535 in a 2×2 file of a
+/// few hundred bytes) is refused from its header, before the decoder allocates 51 GB; the error names the
+/// file, what it declares and how to raise the limit.
+#[test]
+fn a_header_that_claims_a_huge_image_is_refused_before_decoding() {
+    let dir = TempDir::new("exr-huge");
+    let path = dir.path().join("huge.exr");
+    write_exr(&path, &[("", &ramp(2, 2, 3, 0.5))]).unwrap();
+    let mut bytes = std::fs::read(&path).unwrap();
+    let at = bytes.windows(16).position(|w| w == b"dataWindow\0box2i").expect("a data window") + 17 + 4;
+    for (i, v) in [0i32, 0, 65534, 65534].iter().enumerate() {
+        bytes[at + 4 * i..at + 4 * i + 4].copy_from_slice(&v.to_le_bytes());
+    }
+    std::fs::write(&path, &bytes).unwrap();
+    let err = read_exr(&path).unwrap_err().to_string();
+    assert!(err.contains("huge.exr") && err.contains("65535x65535 with 3 channels"), "{err}");
+    assert!(err.contains("HUSH_MAX_EXR_SAMPLES"), "{err}");
+    // The real file is far below the limit.
+    write_exr(&path, &[("", &ramp(2, 2, 3, 0.5))]).unwrap();
+    assert_eq!(hush_dataset::check_exr_header(&path).unwrap(), 12);
+}

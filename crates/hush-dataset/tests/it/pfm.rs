@@ -42,14 +42,24 @@ fn malformed_files_name_the_file_and_the_fault() {
     for (name, bytes, says) in [
         ("magic.pfm", b"P6\n1 1\n-1.0\n\0\0\0\0".to_vec(), "magic"),
         ("short.pfm", b"PF\n2 2\n-1.0\n\0\0\0\0".to_vec(), "needs 48 bytes"),
-        ("size.pfm", b"PF\n0 2\n-1.0\n".to_vec(), "size"),
+        ("size.pfm", b"PF\n0 2\n-1.0\n".to_vec(), "width \"0\""),
         ("header.pfm", b"PF\n2".to_vec(), "header ends"),
+        // Hostile headers: a size whose product overflows, one far beyond the limit with no data, a side
+        // written as a float, a NaN scale, and a header that ends without the byte before the samples.
+        ("overflow.pfm", b"PF\n4294967296 4294967296\n-1.0\n".to_vec(), "above the limit"),
+        ("huge.pfm", b"PF\n65535 65535\n-1.0\n".to_vec(), "above the limit"),
+        ("float.pfm", b"PF\n1e300 2\n-1.0\n".to_vec(), "width \"1e300\""),
+        ("nan.pfm", b"PF\n1 1\nNaN\n\0\0\0\0\0\0\0\0\0\0\0\0".to_vec(), "scale \"NaN\""),
+        ("end.pfm", b"Pf\n1 1\n-1.0".to_vec(), "needs 4 bytes"),
     ] {
         let path = dir.join(name);
         std::fs::write(&path, bytes).unwrap();
         let err = read_pfm(&path).unwrap_err().to_string();
         assert!(err.contains(name) && err.contains(says), "{name}: {err}");
     }
+    // A directory is not read as a file, nor called missing.
+    let err = read_pfm(dir.path()).unwrap_err().to_string();
+    assert!(err.contains("not a regular file"), "{err}");
     let err = write_pfm(dir.join("two.pfm"), &ramp(2, 2, 2, 0.0)).unwrap_err().to_string();
     assert!(err.contains("two.pfm") && err.contains("1 or 3 channels"), "{err}");
 }

@@ -166,3 +166,23 @@ fn a_scene_without_light_is_a_named_warning() {
     let sky = warnings(&dir, r#"<emitter type="constant"/>"#);
     assert!(sky.iter().all(|w| !w.contains("nothing emits")), "{sky:?}");
 }
+
+/// Hostile Mitsuba files are refused with the line, not followed until memory or the stack runs out: a
+/// `$variable` expanded into a value thousands of times (quadratic growth from a small file), and BSDFs
+/// nested thousands deep (the reader recurses on them).
+#[test]
+fn hostile_mitsuba_files_are_refused_early() {
+    let dir = scratch("hostile-mitsuba");
+    let long = "1".repeat(1000);
+    let refs = "$a".repeat(200);
+    let xml = scene3(&format!(
+        "<default name=\"a\" value=\"{long}\"/>\n<shape type=\"sphere\"><float name=\"radius\" value=\"{refs}\"/></shape>"
+    ));
+    let err = load_err(&dir, &xml);
+    assert!(err.contains("scene.xml:") && err.contains("grows beyond 65536 bytes"), "{err}");
+    let depth = 5000;
+    let nested =
+        format!("{}<bsdf type=\"diffuse\"/>{}", "<bsdf type=\"twosided\">".repeat(depth), "</bsdf>".repeat(depth));
+    let err = load_err(&dir, &scene3(&format!("<shape type=\"rectangle\">{nested}</shape>")));
+    assert!(err.contains("nested more than 16 deep"), "{err}");
+}
