@@ -20,6 +20,9 @@ use crate::transfer::Transfer;
 use crate::unet::{UNet, UNetConfig, UNetKind};
 use crate::weights::ModelInfo;
 
+/// The most tensors a TZA table may list: OIDN's networks have about 40, hush's at most a few hundred.
+const MAX_TENSORS: usize = 4096;
+
 const MAGIC: u16 = 0x41D7;
 const VERSION: (u8, u8) = (2, 0);
 const ALIGN: usize = 64;
@@ -93,7 +96,14 @@ pub fn parse_tza(bytes: &[u8]) -> Result<Vec<TzaTensor>> {
     }
     c.pos = table as usize;
     let count = c.u32(&|| "the tensor count".into())? as usize;
+    if count > MAX_TENSORS {
+        bail!(
+            "TZA: corrupt: the table lists {count} tensors, more than the {MAX_TENSORS} a network of hush or OIDN has"
+        )
+    }
     let mut tensors: Vec<TzaTensor> = Vec::with_capacity(count.min(1024));
+    // The tensors' bytes together: entries that alias one range would each be widened to f32 anew.
+    let mut total: u64 = 0;
     for index in 0..count {
         let entry = || format!("table entry {index} of {count}");
         let name_len = c.u16(&entry)? as usize;
@@ -128,6 +138,17 @@ pub fn parse_tza(bytes: &[u8]) -> Result<Vec<TzaTensor>> {
                 bytes.len()
             )
         };
+        total += size as u64;
+        if total > bytes.len() as u64 {
+            bail!(
+                "TZA: corrupt: the tensors up to {name:?} claim {total} bytes of data in a file of {} bytes (entries \
+                 overlap)",
+                bytes.len()
+            )
+        }
+        if tensors.iter().any(|t| t.name == name) {
+            bail!("TZA: tensor {name:?} appears twice")
+        }
         let data = &bytes[offset as usize..end as usize];
         let values: Vec<f32> = match dtype {
             b'f' => data.chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().expect("4 bytes"))).collect(),
@@ -136,9 +157,6 @@ pub fn parse_tza(bytes: &[u8]) -> Result<Vec<TzaTensor>> {
             _ => data.iter().map(|&b| b as f32).collect(),
         };
         debug_assert_eq!(values.len(), n);
-        if tensors.iter().any(|t| t.name == name) {
-            bail!("TZA: tensor {name:?} appears twice")
-        }
         tensors.push(TzaTensor { name, dims, layout, values });
     }
     Ok(tensors)

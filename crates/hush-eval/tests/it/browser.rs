@@ -129,6 +129,16 @@ impl Browser {
         self.call("Input.dispatchKeyEvent", json!({"type": "keyUp", "key": key}));
     }
 
+    /// A key without text (an arrow key), as keyDown and keyUp with its DOM code.
+    pub fn arrow(&mut self, key: &str, code: u32) {
+        for kind in ["rawKeyDown", "keyUp"] {
+            self.call(
+                "Input.dispatchKeyEvent",
+                json!({"type": kind, "key": key, "code": key, "windowsVirtualKeyCode": code}),
+            );
+        }
+    }
+
     pub fn mouse(&mut self, kind: &str, x: f64, y: f64, buttons: u32) {
         let button = if buttons != 0 || kind != "mouseMoved" { "left" } else { "none" };
         self.call(

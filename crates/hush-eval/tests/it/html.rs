@@ -270,6 +270,18 @@ fn drive_viewer(b: &mut Browser, images: &[(String, Image)], exposure: f32) {
         noisy_error.iter().map(|&c| u32::from(c)).sum::<u32>() > 40,
         "the noisy input's error shows: {noisy_error:?}"
     );
+    // The error list and the scale's top, chosen with the keyboard as a user would: the picture changes.
+    let select = |b: &mut Browser, class: &str| {
+        b.eval(&format!("document.querySelector('#viewer-0 .{class}').focus()"));
+        b.arrow("ArrowDown", 40);
+        b.eval(&format!("document.querySelector('#viewer-0 .{class}').value"))
+    };
+    assert_eq!(select(b, "hv-error"), "abs", "the error list moved to the tonemapped difference");
+    assert_eq!(select(b, "hv-max"), "0.3", "the scale's top moved from 0.1 to 0.3");
+    assert_eq!(b.eval("document.querySelector('#viewer-0 .hv-scale-max').textContent"), "0.3");
+    let other_error = canvas_rgb(b, g.canvas(at));
+    assert_ne!(other_error, noisy_error, "another error measure and scale show another colour");
+    b.eval("document.activeElement.blur()");
     b.key("o");
     // Zoom at the cursor: the wheel doubles the zoom and keeps the pixel under the cursor.
     let before = geometry(b).zoom;
@@ -284,6 +296,19 @@ fn drive_viewer(b: &mut Browser, images: &[(String, Image)], exposure: f32) {
     b.mouse("mouseMoved", at.0, at.1, 0);
     let (_, x, y, _) = readout(b);
     assert_eq!((x, y), (px as i64 - 3, py as i64), "panned by 3 pixels");
+    // The zoom buttons.
+    let button = |b: &mut Browser, class: &str| {
+        let r = b.eval(&format!(
+            "(() => {{ const r = document.querySelector('#viewer-0 .{class}').getBoundingClientRect(); \
+             return [r.left + r.width / 2, r.top + r.height / 2]; }})()"
+        ));
+        b.click(r[0].as_f64().unwrap(), r[1].as_f64().unwrap());
+    };
+    let z = geometry(b).zoom;
+    button(b, "hv-zoom-in");
+    assert!((geometry(b).zoom / z - 2.0).abs() < 1e-9, "the + button doubles the zoom");
+    button(b, "hv-zoom-out");
+    assert!((geometry(b).zoom / z - 1.0).abs() < 1e-9, "the − button halves it");
     // Fit again (key 0): the first geometry.
     b.key("0");
     let fit = geometry(b);

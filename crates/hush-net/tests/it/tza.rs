@@ -213,3 +213,26 @@ fn mismatched_archives_are_clear_errors() -> Result<()> {
     assert!(write_tza(&[bad_layout]).unwrap_err().to_string().contains("layout"));
     Ok(())
 }
+
+/// Hostile tables are refused before any tensor is widened: a count no network has, and entries that all
+/// point at one range of data (each would be copied to f32 anew: a small file could ask for terabytes).
+#[test]
+fn hostile_tables_are_refused() {
+    let mut bad = handmade();
+    bad[320..324].copy_from_slice(&1_000_000u32.to_le_bytes());
+    assert!(err(&bad).contains("1000000 tensors, more than the 4096"), "{}", err(&bad));
+    // Four entries over the same 256 bytes at offset 64: 1024 bytes claimed in a file of about 400.
+    let mut b = handmade()[..320].to_vec();
+    b.extend_from_slice(&4u32.to_le_bytes());
+    for name in ["a", "b", "c", "d"] {
+        b.extend_from_slice(&1u16.to_le_bytes());
+        b.extend_from_slice(name.as_bytes());
+        b.push(1);
+        b.extend_from_slice(&256u32.to_le_bytes());
+        b.push(b'x');
+        b.push(b'B');
+        b.extend_from_slice(&64u64.to_le_bytes());
+    }
+    let e = err(&b);
+    assert!(e.contains("overlap") && e.contains("\"b\""), "{e}");
+}
