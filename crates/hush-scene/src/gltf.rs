@@ -42,7 +42,12 @@ struct Loader<'a> {
     warnings: Vec<String>,
     meshes: Vec<Mesh>,
     camera: Option<(Camera, Option<f32>)>,
+    /// The nodes walked so far: glTF gives a node one parent, so a second visit is a cycle or a shared child.
+    visited: std::collections::HashSet<usize>,
 }
+
+/// The deepest node hierarchy walked (the walk recurses); real files nest a few dozen levels at most.
+const MAX_NODE_DEPTH: usize = 256;
 
 pub(crate) fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
     if !path.is_file() {
@@ -59,6 +64,7 @@ pub(crate) fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
         warnings: Vec::new(),
         meshes: Vec::new(),
         camera: None,
+        visited: std::collections::HashSet::new(),
     };
     for ext in doc.extensions_used() {
         if !SUPPORTED_EXTENSIONS.contains(&ext) {
@@ -70,7 +76,7 @@ pub(crate) fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
         .or_else(|| doc.scenes().next())
         .ok_or_else(|| SceneError::new(path, None, "the glTF file has no scene"))?;
     for node in scene.nodes() {
-        loader.node(&node, Mat4::IDENTITY)?;
+        loader.node(&node, Mat4::IDENTITY, 0)?;
     }
     if loader.meshes.is_empty() {
         return Err(SceneError::new(path, None, "the glTF scene holds no (non-degenerate) triangles"));
@@ -114,7 +120,24 @@ impl Loader<'_> {
         self.warnings.push(format!("{}: {}", self.path.display(), msg.as_ref()));
     }
 
-    fn node(&mut self, node: &gltf::Node, parent: Mat4) -> Result<(), SceneError> {
+    fn node(&mut self, node: &gltf::Node, parent: Mat4, depth: usize) -> Result<(), SceneError> {
+        if !self.visited.insert(node.index()) {
+            return Err(SceneError::new(
+                self.path,
+                None,
+                format!(
+                    "node {} is reached twice in the node hierarchy (a cycle, or a second parent: glTF allows one)",
+                    node.index()
+                ),
+            ));
+        }
+        if depth > MAX_NODE_DEPTH {
+            return Err(SceneError::new(
+                self.path,
+                None,
+                format!("the node hierarchy is deeper than {MAX_NODE_DEPTH} levels at node {}", node.index()),
+            ));
+        }
         let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
         if !world.is_finite() {
             return Err(SceneError::new(self.path, None, format!("node {} has a non-finite transform", node.index())));
@@ -144,7 +167,7 @@ impl Loader<'_> {
             }
         }
         for child in node.children() {
-            self.node(&child, world)?;
+            self.node(&child, world, depth + 1)?;
         }
         Ok(())
     }

@@ -158,3 +158,16 @@ fn gltf_metal_and_unsupported_extension() {
     assert!((alpha - 0.09).abs() < 1e-6 && specular_reflectance == Vec3::new(0.9, 0.6, 0.2));
     assert!(s.warnings.iter().any(|w| w.contains("KHR_materials_sheen")), "{:?}", s.warnings);
 }
+
+/// A node hierarchy with a cycle (a node its own child, or its parent's parent) is refused with the node,
+/// instead of recursing until the stack overflows.
+#[test]
+fn gltf_node_cycles_are_refused() {
+    let dir = scratch("gltf-cycle");
+    let material = r#"{"pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.5, 0.5, 1]}}"#;
+    for children in [r#""children": [2]"#, r#""children": [0]"#] {
+        let path = write_gltf(&dir, material, "", children);
+        let err = Scene::load(&path).unwrap_err().to_string();
+        assert!(err.contains("t.gltf") && err.contains("reached twice in the node hierarchy"), "{children}: {err}");
+    }
+}
