@@ -75,7 +75,7 @@ pub fn read_pfm(path: impl AsRef<Path>) -> Result<Image> {
     }
     let (width, height) = (width as usize, height as usize);
     let data_start = pos + 1;
-    let n = width * height * channels;
+    let n = samples_declared as usize; // checked above: at most the sample limit
     if data_start > bytes.len() || bytes.len() - data_start != 4 * n {
         return Err(bad(
             path,
