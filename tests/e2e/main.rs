@@ -1,6 +1,9 @@
 //! End-to-end tests of the `hush` command line: bad input gets a clear error and no panic, and
 //! the whole pipeline (dataset → train → denoise → eval) runs on a tiny Cornell box.
 
+mod fuzz_corpus;
+#[path = "../fuzz/targets.rs"]
+mod fuzz_targets;
 mod procedural;
 mod shared_scenes;
 
@@ -308,11 +311,17 @@ fn check_eval_report(report: &Path) {
 fn blue_box(dir: &Path) -> PathBuf {
     let cbox_dir = repo().join("data/scenes/cbox");
     let xml = std::fs::read_to_string(cbox()).unwrap();
+    let scene = dir.join("blue-box/scene.xml");
     let mut out = String::new();
     for line in xml.lines() {
         let line = match line.find("value=\"").map(|i| i + 7) {
+            // A scene reads only files of its own folder: the meshes are copied beside it.
             Some(i) if line.contains("name=\"filename\"") => {
-                format!("{}{}/{}", &line[..i], cbox_dir.display(), &line[i..])
+                let file = &line[i..i + line[i..].find('"').unwrap()];
+                let to = scene.parent().unwrap().join(file);
+                std::fs::create_dir_all(to.parent().unwrap()).unwrap();
+                std::fs::copy(cbox_dir.join(file), to).unwrap();
+                line.to_string()
             }
             _ => line.replace("18.387, 13.9873, 6.75357", "6, 12, 20"),
         };
@@ -320,7 +329,6 @@ fn blue_box(dir: &Path) -> PathBuf {
         out.push('\n');
     }
     assert!(out.contains("6, 12, 20"), "the light of the Cornell box changed; update this test");
-    let scene = dir.join("blue-box/scene.xml");
     std::fs::create_dir_all(scene.parent().unwrap()).unwrap();
     std::fs::write(&scene, out).unwrap();
     scene
@@ -600,6 +608,27 @@ fn cbox_dataset_args(ds: &Path, views: &str, spp: &str) -> Vec<String> {
     let args = ["dataset", s(&scene), "--out", s(ds), "--views", views, "--test-views", "1", "--spp", spp];
     let rest = ["--ref-spp", "16", "--aux-spp", "4", "--size", "32", "--seed", "3"];
     args.iter().chain(&rest).map(|a| a.to_string()).collect()
+}
+
+/// Two runs writing one dataset folder at once: the second is refused, names the first's process and writes
+/// nothing; once the first lets go (here the test holds the lock as another run would), a run goes ahead.
+#[test]
+fn a_second_dataset_run_on_the_same_folder_is_refused() {
+    let ds = scratch("dataset-lock");
+    let held = hush_io::lock_folder(&ds.join(".hush-dataset.lock"), "test").unwrap();
+    let args = cbox_dataset_args(&ds, "1", "1");
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let err = expect_error(&args);
+    let expected = format!("is being written by another `hush dataset` (process {})", std::process::id());
+    assert!(err.contains(&expected), "{err}");
+    assert!(!ds.join("manifest.json").exists(), "the refused run wrote a manifest");
+    drop(held);
+    let run = scratch("train-lock");
+    let held = hush_io::lock_folder(&run.join(".hush-train.lock"), "test").unwrap();
+    let err = expect_error(&["train", "--dataset", s(&ds), "--out", s(&run), "--steps", "1"]);
+    assert!(err.contains("is being written by another `hush train`"), "{err}");
+    assert!(!run.join("config.json").exists(), "the refused run wrote its config");
+    drop(held);
 }
 
 /// A 32² Cornell box dataset for the training tests: 3 views (2 train, 1 test) at 2 and 4 spp.

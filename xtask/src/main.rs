@@ -9,6 +9,8 @@ mod bench_net;
 mod cuda_check;
 mod demo;
 mod eval;
+mod fuzz;
+mod hostile;
 mod mitsuba;
 mod procedural;
 mod sweep;
@@ -59,6 +61,13 @@ tasks:
                              NaN/Inf; spread of mean luminance, material and light mix
   mitsuba setup              install Mitsuba 3 (PyPI) into target/mitsuba-venv and verify it renders
   mitsuba references         re-render the references of data/tests/mitsuba with Mitsuba 3
+  fuzz [TARGET ...] [--minutes N] [--max-len BYTES]
+                             coverage-guided fuzzing (libFuzzer, stable Rust) of the loaders: mitsuba, obj, gltf,
+                             exr, weights, manifest, sweep; N minutes each (default 10); findings and a summary
+                             in target/fuzz/ (kept cases in tests/fuzz/regressions/ replay in `cargo test`)
+  hostile [--release]        hush against crafted files (huge headers, endless files, loops, deep nesting, a
+                             32768² render) under /usr/bin/time and prlimit: each a clear error or a named
+                             warning, under 100 MB of peak memory; the table in target/hostile/summary.json
   cuda-check                 check that the `cuda` feature compiles (hush, hush-net, hush-train, all targets)
                              with NVIDIA's nvcc from PyPI in target/cuda-venv, into target/cuda-check; no GPU
                              needed (heavy: 10 to 12 minutes cold on 2 cores; run by hand before releases)
@@ -78,6 +87,8 @@ fn main() -> ExitCode {
         Some("train-check") => train_check::run(&args[1..]),
         Some("train-default") => train_default::run(&args[1..]),
         Some("cuda-check") => cuda_check::run(&args[1..]),
+        Some("fuzz") => fuzz::run(&args[1..]),
+        Some("hostile") => hostile::run(&args[1..]),
         _ => Err(format!("{USAGE}{}", sweep::USAGE)),
     };
     match result {

@@ -147,7 +147,7 @@ pub const MAX_EXR_SAMPLES: u64 = 1 << 29;
 
 /// [`MAX_EXR_SAMPLES`], or the value of `HUSH_MAX_EXR_SAMPLES` where it is set to a number.
 pub fn max_exr_samples() -> u64 {
-    std::env::var("HUSH_MAX_EXR_SAMPLES").ok().and_then(|v| v.trim().parse().ok()).unwrap_or(MAX_EXR_SAMPLES)
+    hush_io::limit_from_env("HUSH_MAX_EXR_SAMPLES", MAX_EXR_SAMPLES)
 }
 
 /// The samples an EXR file's header declares (pixels × channels over every part), read without decoding any

@@ -53,7 +53,7 @@ pub use layout::{AuxKind, AuxSource, Layout, ViewImages, load_view};
 pub use manifest::{
     AuxFiles, AuxRecord, CameraRecord, DatasetConfig, FireflyRecord, Manifest, PendingView, ProbeRecord,
     ProceduralRecord, ProceduralScene, ReferenceCheck, ReferenceRecord, RenderRecord, SceneEntry, SkippedScene, Split,
-    ViewGeneration, ViewRecord, manifest_files,
+    ViewGeneration, ViewRecord, manifest_files, max_manifest_bytes,
 };
 pub use pfm::{read_pfm, write_pfm};
 pub use png::{srgb_encode, write_png_preview};

@@ -324,6 +324,11 @@ impl Default for Manifest {
     }
 }
 
+/// The largest manifest hush reads: 256 MiB (a million views), or `HUSH_MAX_MANIFEST_BYTES` (bytes).
+pub fn max_manifest_bytes() -> hush_io::Limit {
+    hush_io::Limit::from_env("HUSH_MAX_MANIFEST_BYTES", 256 << 20)
+}
+
 impl Manifest {
     pub const FORMAT_VERSION: u32 = 2;
     pub const FILE_NAME: &'static str = "manifest.json";
@@ -363,7 +368,8 @@ impl Manifest {
 
     /// Reads one manifest file (no merging).
     pub fn load_file(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, "read the dataset manifest", e))?;
+        let text = hush_io::read_text_limited(path, max_manifest_bytes(), "dataset manifest")
+            .map_err(|e| Error::file(path, "read the dataset manifest", e))?;
         let version = serde_json::from_str::<serde_json::Value>(&text)
             .ok()
             .and_then(|v| v.get("format_version").and_then(|n| n.as_u64()));

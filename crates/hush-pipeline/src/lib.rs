@@ -56,6 +56,18 @@ pub mod scene;
 pub mod train;
 
 pub use dataset::{BuildSummary, DatasetPlan};
+
+/// The largest weight file hush reads (`--model`, `--init`, a checkpoint): 2 GiB, or `HUSH_MAX_WEIGHT_BYTES`
+/// (bytes). OIDN's largest official network is 4 MB as TZA.
+pub fn max_weight_bytes() -> hush_io::Limit {
+    hush_io::Limit::from_env("HUSH_MAX_WEIGHT_BYTES", 2 << 30)
+}
+
+/// A weight file's bytes (a `.tza` or `.safetensors`), read up to [`max_weight_bytes`]; the error names the
+/// file and what is wrong with it ("no such file", "is a directory", the limit).
+pub fn read_weight_file(path: &std::path::Path) -> std::io::Result<Vec<u8>> {
+    hush_io::read_limited(path, max_weight_bytes(), "weight file")
+}
 pub use device::{device, is_known as is_known_device};
 pub use eval::{Denoiser, EvalPlan};
 pub use observer::{Notes, Observer, Quiet, RenderProgress};

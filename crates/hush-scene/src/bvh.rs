@@ -10,6 +10,8 @@ use glam::Vec3;
 pub const MAX_LEAF_TRIANGLES: usize = 4;
 /// SAH bins per axis.
 const BINS: usize = 12;
+/// The deepest node split by the SAH; deeper ones split their range in half (see `Builder::build`).
+pub const MAX_SAH_DEPTH: usize = 48;
 /// Cost of one ray-box test relative to one ray-triangle test, in the SAH.
 const TRAVERSAL_COST: f32 = 1.0;
 
@@ -79,7 +81,7 @@ impl Bvh {
         let mut order: Vec<u32> = (0..bounds.len() as u32).collect();
         let mut nodes = vec![BvhNode { min: [0.0; 3], first: 0, max: [0.0; 3], count: 0 }];
         let mut builder = Builder { boxes: &boxes, centroids, order: &mut order, nodes: &mut nodes };
-        builder.build(0, 0, bounds.len());
+        builder.build(0, 0, bounds.len(), 1);
         Bvh { nodes, order }
     }
 
@@ -116,8 +118,11 @@ impl Builder<'_> {
         (b, c)
     }
 
-    /// Fills node `index` with triangles `order[start..end]`, recursing into children.
-    fn build(&mut self, index: usize, start: usize, end: usize) {
+    /// Fills node `index` (at `depth`, the root's is 1) with triangles `order[start..end]`, recursing into
+    /// children. Below [`MAX_SAH_DEPTH`] every split halves the range, so no input (say, centroids spaced
+    /// ever more widely, which the SAH peels one at a time) makes the tree deeper than that plus log2 of the
+    /// triangle count.
+    fn build(&mut self, index: usize, start: usize, end: usize, depth: usize) {
         let (bounds, cbounds) = self.bounds(start, end);
         let count = end - start;
         let leaf = |nodes: &mut Vec<BvhNode>| {
@@ -136,15 +141,15 @@ impl Builder<'_> {
             }
             return;
         }
-        let split = self.best_split(start, end, &bounds, &cbounds);
+        let split = if depth < MAX_SAH_DEPTH { self.best_split(start, end, &bounds, &cbounds) } else { None };
         let Some((axis, position)) = split else {
             if count <= MAX_LEAF_TRIANGLES {
                 leaf(self.nodes);
                 return;
             }
-            // No useful SAH split (e.g. identical centroids): split the range in half.
+            // No useful SAH split (e.g. identical centroids), or too deep for one: split the range in half.
             let mid = start + count / 2;
-            self.split_children(index, &bounds, start, mid, end);
+            self.split_children(index, &bounds, start, mid, end, depth);
             return;
         };
         let (mut i, mut j) = (start, end);
@@ -157,18 +162,18 @@ impl Builder<'_> {
             }
         }
         let mid = if i == start || i == end { start + count / 2 } else { i };
-        self.split_children(index, &bounds, start, mid, end);
+        self.split_children(index, &bounds, start, mid, end, depth);
     }
 
-    fn split_children(&mut self, index: usize, bounds: &Aabb, start: usize, mid: usize, end: usize) {
+    fn split_children(&mut self, index: usize, bounds: &Aabb, start: usize, mid: usize, end: usize, depth: usize) {
         let left = self.nodes.len();
         let empty = BvhNode { min: [0.0; 3], first: 0, max: [0.0; 3], count: 0 };
         self.nodes.push(empty);
         self.nodes.push(empty);
         self.nodes[index] =
             BvhNode { min: bounds.min.to_array(), first: left as u32, max: bounds.max.to_array(), count: 0 };
-        self.build(left, start, mid);
-        self.build(left + 1, mid, end);
+        self.build(left, start, mid, depth + 1);
+        self.build(left + 1, mid, end, depth + 1);
     }
 
     /// The binned SAH split (axis, centroid threshold), or `None` when a leaf is cheaper.

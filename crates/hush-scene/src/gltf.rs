@@ -22,7 +22,6 @@ use std::path::Path;
 use glam::{Mat4, Vec2, Vec3};
 
 use crate::shapes::Geometry;
-use crate::texture::srgb_to_linear;
 use crate::{
     Camera, Film, Material, Mesh, Microfacet, PixelFilter, Reflectance, Scene, SceneError, Texture, TextureId,
 };
@@ -35,8 +34,10 @@ const FILM_HEIGHT: u32 = 512;
 
 struct Loader<'a> {
     path: &'a Path,
-    buffers: Vec<gltf::buffer::Data>,
-    images: Vec<gltf::image::Data>,
+    buffers: Vec<Vec<u8>>,
+    /// Each image, decoded when a material first uses it (`None`: not yet).
+    images: Vec<Option<crate::texture::Pixels>>,
+    document: gltf::Document,
     textures: Vec<Texture>,
     texture_ids: HashMap<(usize, [u32; 3]), TextureId>,
     warnings: Vec<String>,
@@ -46,19 +47,120 @@ struct Loader<'a> {
     visited: std::collections::HashSet<usize>,
 }
 
+/// The most elements of an accessor without a buffer view (whose zeros no file's length bounds).
+const MAX_SPARSE_COUNT: usize = 1 << 24;
+
+/// What a caught panic said.
+fn panic_text(p: &Box<dyn std::any::Any + Send>) -> String {
+    p.downcast_ref::<&str>().map(|s| s.to_string()).or_else(|| p.downcast_ref::<String>().cloned()).unwrap_or_default()
+}
+
+/// The file a relative URI of the glTF names, which must lie in the glTF's folder (or under
+/// `HUSH_SCENE_ROOT` where that is set): a downloaded scene reads nothing else of the machine.
+fn referenced_file(path: &Path, uri: &str) -> Result<std::path::PathBuf, String> {
+    if uri.contains("://") || uri.starts_with('/') || uri.starts_with('\\') {
+        return Err(format!("URI '{uri}' is not a relative path: hush reads only files beside the glTF"));
+    }
+    let decoded = percent_decode(uri).ok_or_else(|| format!("URI '{uri}' has a malformed %-escape"))?;
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let file = dir.join(&decoded);
+    crate::check_inside(&file, dir).map(|()| file)
+}
+
+fn percent_decode(s: &str) -> Option<String> {
+    let b = s.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] == b'%' {
+            let hex = std::str::from_utf8(b.get(i + 1..i + 3)?).ok()?;
+            out.push(u8::from_str_radix(hex, 16).ok()?);
+            i += 3;
+        } else {
+            out.push(b[i]);
+            i += 1;
+        }
+    }
+    String::from_utf8(out).ok()
+}
+
+/// The payload of a `data:` URI (base64 only, as glTF writes them).
+fn data_uri(uri: &str) -> Option<Result<Vec<u8>, String>> {
+    let rest = uri.strip_prefix("data:")?;
+    Some(match rest.split_once(";base64,") {
+        Some((_, payload)) => base64_decode(payload).ok_or_else(|| "a data URI is not valid base64".to_string()),
+        None => Err("a data URI is not base64-encoded: glTF embeds buffers and images as base64".into()),
+    })
+}
+
+fn base64_decode(s: &str) -> Option<Vec<u8>> {
+    let value = |c: u8| match c {
+        b'A'..=b'Z' => Some(c - b'A'),
+        b'a'..=b'z' => Some(c - b'a' + 26),
+        b'0'..=b'9' => Some(c - b'0' + 52),
+        b'+' | b'-' => Some(62),
+        b'/' | b'_' => Some(63),
+        _ => None,
+    };
+    let digits: Vec<u8> = s.bytes().filter(|c| !c.is_ascii_whitespace()).collect();
+    let digits = digits.strip_suffix(b"==").or_else(|| digits.strip_suffix(b"=")).unwrap_or(&digits);
+    let mut out = Vec::with_capacity(digits.len() * 3 / 4);
+    let (mut acc, mut bits) = (0u32, 0);
+    for &c in digits {
+        acc = (acc << 6) | u32::from(value(c)?);
+        bits += 6;
+        if bits >= 8 {
+            bits -= 8;
+            out.push((acc >> bits) as u8);
+        }
+    }
+    Some(out)
+}
+
+/// Every buffer of the document: the GLB's binary chunk, a data URI or a file beside the glTF, each read
+/// up to the scene limit and at least as long as its declared `byteLength`.
+fn read_buffers(path: &Path, doc: &gltf::Document, mut blob: Option<Vec<u8>>) -> Result<Vec<Vec<u8>>, SceneError> {
+    let mut out = Vec::new();
+    for buffer in doc.buffers() {
+        let fail = |m: String| SceneError::new(path, None, format!("buffer {}: {m}", buffer.index()));
+        let data = match buffer.source() {
+            gltf::buffer::Source::Bin => blob.take().ok_or_else(|| fail("the GLB has no binary chunk".into()))?,
+            gltf::buffer::Source::Uri(uri) => match data_uri(uri) {
+                Some(d) => d.map_err(fail)?,
+                None => {
+                    let file = referenced_file(path, uri).map_err(fail)?;
+                    hush_io::read_limited_bare(&file, crate::max_file_bytes())
+                        .map_err(|e| fail(format!("{}: {e}", file.display())))?
+                }
+            },
+        };
+        if data.len() < buffer.length() {
+            return Err(fail(format!("holds {} bytes but declares byteLength {}", data.len(), buffer.length())));
+        }
+        out.push(data);
+    }
+    Ok(out)
+}
+
 /// The deepest node hierarchy walked (the walk recurses); real files nest a few dozen levels at most.
 const MAX_NODE_DEPTH: usize = 256;
 
 pub(crate) fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
-    if !path.is_file() {
-        return Err(SceneError::new(path, None, "scene file not found: check the path"));
-    }
-    let (doc, buffers, images) =
-        gltf::import(path).map_err(|e| SceneError::new(path, None, format!("cannot load glTF: {e}")))?;
+    let bytes = hush_io::read_limited_bare(path, crate::max_file_bytes())
+        .map_err(|e| SceneError::new(path, None, format!("cannot read the scene file: {e}")))?;
+    // gltf 1.4 panics on some malformed files (an out-of-range index in its own validation, found by
+    // fuzzing): such a panic is this file's error, not the process's end.
+    let parsed = std::panic::catch_unwind(|| gltf::Gltf::from_slice(&bytes))
+        .map_err(|p| SceneError::new(path, None, format!("malformed glTF ({})", panic_text(&p))))?
+        .map_err(|e| SceneError::new(path, None, format!("cannot load glTF: {e}")))?;
+    let doc = parsed.document.clone();
+    let buffers = read_buffers(path, &doc, parsed.blob)?;
+    let images = doc.images().map(|_| None).collect();
     let mut loader = Loader {
         path,
         buffers,
         images,
+        document: doc.clone(),
         textures: Vec::new(),
         texture_ids: HashMap::new(),
         warnings: Vec::new(),
@@ -113,6 +215,56 @@ pub(crate) fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
     }
     out.camera.validate().map_err(|m| SceneError::new(path, None, format!("camera: {m}")))?;
     Ok(out)
+}
+
+/// The accessors hush reads, checked against what glTF requires of them (the reader of the gltf crate
+/// assumes it): POSITION and NORMAL are float VEC3, TEXCOORD_0 a float or normalized VEC2, indices
+/// unsigned SCALARs, each wholly inside its buffer view.
+fn check_accessors(prim: &gltf::Primitive) -> Result<(), String> {
+    use gltf::accessor::{DataType as D, Dimensions as Dim};
+    use gltf::mesh::Semantic;
+    let check = |what: &str, a: &gltf::Accessor, dims: Dim, types: &[D]| -> Result<(), String> {
+        if a.dimensions() != dims || !types.contains(&a.data_type()) {
+            return Err(format!(
+                "{what} accessor {} is {:?} of {:?}; glTF requires {dims:?} of {types:?}",
+                a.index(),
+                a.dimensions(),
+                a.data_type()
+            ));
+        }
+        // A sparse accessor without a buffer view starts from `count` zeros: bounded, as a file's length
+        // bounds every other accessor.
+        if a.view().is_none() && a.count() > MAX_SPARSE_COUNT {
+            return Err(format!(
+                "{what} accessor {} declares {} elements without a buffer view (the limit is {MAX_SPARSE_COUNT})",
+                a.index(),
+                a.count()
+            ));
+        }
+        if let Some(view) = a.view() {
+            let stride = view.stride().unwrap_or(a.size());
+            let needed = match a.count() {
+                0 => 0,
+                n => (n - 1).checked_mul(stride).and_then(|b| b.checked_add(a.size())).ok_or("too large")?,
+            };
+            if a.offset().checked_add(needed).is_none_or(|end| end > view.length()) || stride < a.size() {
+                return Err(format!("{what} accessor {} does not fit in its buffer view {}", a.index(), view.index()));
+            }
+        }
+        Ok(())
+    };
+    for (semantic, a) in prim.attributes() {
+        match semantic {
+            Semantic::Positions => check("POSITION", &a, Dim::Vec3, &[D::F32])?,
+            Semantic::Normals => check("NORMAL", &a, Dim::Vec3, &[D::F32])?,
+            Semantic::TexCoords(0) => check("TEXCOORD_0", &a, Dim::Vec2, &[D::F32, D::U8, D::U16])?,
+            _ => {}
+        }
+    }
+    if let Some(a) = prim.indices() {
+        check("indices", &a, Dim::Scalar, &[D::U8, D::U16, D::U32])?;
+    }
+    Ok(())
 }
 
 impl Loader<'_> {
@@ -188,7 +340,8 @@ impl Loader<'_> {
             return Ok(());
         }
         let buffers = &self.buffers;
-        let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
+        check_accessors(prim).map_err(|m| SceneError::new(self.path, None, format!("primitive '{name}': {m}")))?;
+        let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d[..]));
         let positions: Vec<Vec3> = reader
             .read_positions()
             .ok_or_else(|| SceneError::new(self.path, None, format!("primitive '{name}' has no POSITION")))?
@@ -234,52 +387,46 @@ impl Loader<'_> {
         Ok(())
     }
 
+    /// Image `index` decoded (PNG or JPEG, sRGB to linear) from its buffer view, data URI or file.
+    fn decode(&self, index: usize) -> Result<crate::texture::Pixels, String> {
+        let image = self.document.images().nth(index).ok_or_else(|| format!("image {index} is missing"))?;
+        let label = format!("{index} of {}", self.path.display());
+        match image.source() {
+            gltf::image::Source::View { view, .. } => {
+                let buffer = self.buffers.get(view.buffer().index()).ok_or("its buffer is missing")?;
+                let bytes = buffer
+                    .get(view.offset()..view.offset().saturating_add(view.length()))
+                    .ok_or_else(|| format!("image {label}: its buffer view lies outside its buffer"))?;
+                crate::texture::decode_image(bytes, &label, false)
+            }
+            gltf::image::Source::Uri { uri, .. } => match data_uri(uri) {
+                Some(bytes) => crate::texture::decode_image(&bytes?, &label, false),
+                None => crate::texture::read_image(&referenced_file(self.path, uri)?, false),
+            },
+        }
+    }
+
     /// The base color texture `image` (sRGB, decoded to linear) times `factor`, made once.
     fn texture(&mut self, image: usize, factor: Vec3) -> Result<TextureId, String> {
         let key = (image, factor.to_array().map(f32::to_bits));
         if let Some(&id) = self.texture_ids.get(&key) {
             return Ok(id);
         }
-        let img = self.images.get(image).ok_or_else(|| format!("image {image} is missing"))?;
-        use gltf::image::Format as F;
-        let lut: Vec<f32> = (0..256).map(|i| srgb_to_linear(i as f32 / 255.0)).collect();
-        let (channels, bytes) = match img.format {
-            F::R8 => (1, 1),
-            F::R8G8 => (2, 1),
-            F::R8G8B8 => (3, 1),
-            F::R8G8B8A8 => (4, 1),
-            F::R16 => (1, 2),
-            F::R16G16 => (2, 2),
-            F::R16G16B16 => (3, 2),
-            F::R16G16B16A16 => (4, 2),
-            F::R32G32B32FLOAT => (3, 4),
-            F::R32G32B32A32FLOAT => (4, 4),
-        };
-        let texel = |i: usize, c: usize| -> f32 {
-            let c = if channels < 3 { 0 } else { c };
-            let o = (i * channels + c) * bytes;
-            let p = &img.pixels;
-            match bytes {
-                1 => lut[p[o] as usize],
-                2 => srgb_to_linear(u16::from_le_bytes([p[o], p[o + 1]]) as f32 / 65535.0),
-                _ => f32::from_le_bytes([p[o], p[o + 1], p[o + 2], p[o + 3]]),
-            }
-        };
-        let n = img.width as usize * img.height as usize;
-        if img.pixels.len() < n * channels * bytes {
-            return Err(format!("image {image} is truncated"));
+        if self.images.get(image).is_none() {
+            return Err(format!("image {image} is missing"));
         }
-        let mut data = Vec::with_capacity(n * 3);
-        for i in 0..n {
-            for c in 0..3 {
-                data.push(texel(i, c) * factor[c]);
-            }
+        if self.images[image].is_none() {
+            self.images[image] = Some(self.decode(image)?);
         }
+        let img = self.images[image].as_ref().expect("decoded");
+        let data: Vec<f32> =
+            img.data.chunks_exact(3).flat_map(|t| [t[0] * factor.x, t[1] * factor.y, t[2] * factor.z]).collect();
+        let (width, height) = (img.width, img.height);
         let id = TextureId(self.textures.len() as u32);
         self.textures.push(Texture {
             path: self.path.with_extension(format!("gltf#image{image}")),
-            width: img.width,
-            height: img.height,
+            width,
+            height,
             data,
         });
         self.texture_ids.insert(key, id);

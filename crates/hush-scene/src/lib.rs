@@ -34,7 +34,32 @@ pub mod procedural;
 mod shapes;
 mod texture;
 
-pub use bvh::{Bvh, BvhNode, MAX_LEAF_TRIANGLES};
+/// The largest scene, mesh, buffer or image file hush reads: 2 GiB, or the environment variable
+/// `HUSH_MAX_SCENE_BYTES` (bytes). A larger file, or one that never ends, is refused after reading at most
+/// that much.
+pub fn max_file_bytes() -> hush_io::Limit {
+    hush_io::Limit::from_env("HUSH_MAX_SCENE_BYTES", 2 << 30)
+}
+
+/// Fails unless `file` lies inside `dir` (after resolving `..` and symbolic links), or inside
+/// `HUSH_SCENE_ROOT` where that is set: a scene reads only files of its own folder. A file that does not
+/// exist passes (reading it then says so).
+pub(crate) fn check_inside(file: &std::path::Path, dir: &std::path::Path) -> Result<(), String> {
+    let Ok(real) = file.canonicalize() else { return Ok(()) };
+    let roots = [Some(dir.to_path_buf()), std::env::var_os("HUSH_SCENE_ROOT").map(std::path::PathBuf::from)];
+    if roots.iter().flatten().filter_map(|r| r.canonicalize().ok()).any(|r| real.starts_with(r)) {
+        return Ok(());
+    }
+    Err(format!(
+        "{} lies outside the scene's folder {} (it resolves to {}): hush reads only files beside a scene; \
+         set HUSH_SCENE_ROOT to a folder that holds both to allow it",
+        file.display(),
+        dir.display(),
+        real.display()
+    ))
+}
+
+pub use bvh::{Bvh, BvhNode, MAX_LEAF_TRIANGLES, MAX_SAH_DEPTH};
 pub use error::SceneError;
 pub use model::{
     Analytic, Camera, ComplexIor, EnvMap, Environment, Film, Material, Mesh, Microfacet, PixelFilter, Reflectance,

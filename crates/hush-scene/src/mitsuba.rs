@@ -38,15 +38,27 @@ use crate::{
 /// The longest attribute value `$variable` substitution may produce: any real scene's values are far shorter,
 /// and a file of `$a$a$a...` with a long default would otherwise grow quadratically.
 const MAX_SUBSTITUTED: usize = 64 * 1024;
+/// The most XML nodes (elements, attributes' texts and texts) of a scene file: a real scene of a thousand shapes
+/// has tens of thousands, and the parsed tree of this many takes about 50 MB.
+const MAX_XML_NODES: u64 = 500_000;
 /// The deepest nesting of `<bsdf>` elements (real scenes nest two or three: twosided around a mask ...).
 const MAX_BSDF_NESTING: usize = 16;
 
 impl Scene {
     /// Parses Mitsuba XML text; `path` names the file in errors and anchors relative paths.
     pub fn from_mitsuba_str(text: &str, path: &Path) -> Result<Scene, SceneError> {
-        let doc = Document::parse(text).map_err(|e| {
-            let pos = e.pos();
-            SceneError::new(path, Some(pos.row), format!("malformed XML: {e}"))
+        let nodes_limit = hush_io::limit_from_env("HUSH_MAX_XML_NODES", MAX_XML_NODES).min(u64::from(u32::MAX)) as u32;
+        let options = roxmltree::ParsingOptions { nodes_limit, ..Default::default() };
+        let doc = Document::parse_with_options(text, options).map_err(|e| match e {
+            roxmltree::Error::NodesLimitReached => SceneError::new(
+                path,
+                None,
+                format!(
+                    "the XML holds more than {nodes_limit} elements, attributes and texts; refused before it fills \
+                     memory (a genuine scene this large: raise the limit with HUSH_MAX_XML_NODES=<count>)"
+                ),
+            ),
+            e => SceneError::new(path, Some(e.pos().row), format!("malformed XML: {e}")),
         })?;
         let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
         let mut parser = Parser {
@@ -106,6 +118,13 @@ impl Parser<'_, '_> {
 
     fn err(&self, node: Node, msg: impl Into<String>) -> SceneError {
         SceneError::new(self.path, Some(self.line(node)), msg)
+    }
+
+    /// The file `filename` of `node` names, beside the scene: one outside the scene's folder is an error.
+    fn referenced(&self, node: Node, filename: &str) -> Result<PathBuf, SceneError> {
+        let file = self.dir.join(filename);
+        crate::check_inside(&file, &self.dir).map_err(|m| self.err(node, m))?;
+        Ok(file)
     }
 
     fn warn(&mut self, node: Node, msg: impl AsRef<str>) {
@@ -347,7 +366,7 @@ impl Parser<'_, '_> {
             }
         }
         let filename = filename.ok_or_else(|| self.err(node, "a bitmap texture needs <string name=\"filename\">"))?;
-        let file = self.dir.join(&filename);
+        let file = self.referenced(node, &filename)?;
         match self.textures.get(&file, raw) {
             Ok(id) => Ok(Reflectance::Texture(id)),
             Err(e) => {
@@ -1095,13 +1114,19 @@ impl Parser<'_, '_> {
             _ => {
                 let filename =
                     filename.ok_or_else(|| self.err(node, "an obj shape needs <string name=\"filename\">"))?;
-                let file = self.dir.join(&filename);
-                if !file.is_file() {
-                    self.warn(
-                        node,
-                        format!("shape '{name}': mesh file {} not found: the shape is skipped", file.display()),
-                    );
-                    return Ok(ShapeResult::Missing(filename));
+                let file = self.referenced(node, &filename)?;
+                match hush_io::describe_unreadable(&file) {
+                    Some(why) if why == "no such file" => {
+                        self.warn(
+                            node,
+                            format!("shape '{name}': mesh file {} not found: the shape is skipped", file.display()),
+                        );
+                        return Ok(ShapeResult::Missing(filename));
+                    }
+                    Some(why) => {
+                        return Err(self.err(node, format!("shape '{name}': mesh file {} {why}", file.display())));
+                    }
+                    None => {}
                 }
                 let obj =
                     crate::obj::read_obj(&file, false).map_err(|e| self.err(node, format!("shape '{name}': {e}")))?;
@@ -1203,7 +1228,7 @@ impl Parser<'_, '_> {
                 if scale < 0.0 {
                     return Err(self.err(node, format!("envmap scale {scale} is negative")));
                 }
-                let file = self.dir.join(&filename);
+                let file = self.referenced(node, &filename)?;
                 let px = match read_image(&file, false) {
                     Ok(px) => px,
                     Err(e) => {

@@ -472,8 +472,10 @@ impl Scene {
     fn load_format(path: &std::path::Path) -> Result<Scene, crate::SceneError> {
         match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
             Some("xml") => {
-                let text = std::fs::read_to_string(path)
-                    .map_err(|e| crate::SceneError::new(path, None, format!("cannot read scene file: {e}")))?;
+                let bytes = hush_io::read_limited_bare(path, crate::max_file_bytes())
+                    .map_err(|e| crate::SceneError::new(path, None, format!("cannot read the scene file: {e}")))?;
+                let text = String::from_utf8(bytes)
+                    .map_err(|_| crate::SceneError::new(path, None, "the scene file is not UTF-8 text"))?;
                 Scene::from_mitsuba_str(&text, path)
             }
             Some("obj") => crate::obj::load_obj_scene(path),

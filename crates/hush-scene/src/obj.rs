@@ -2,7 +2,6 @@
 //! MTL materials.
 
 use std::collections::HashMap;
-use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
 use glam::{Vec2, Vec3};
@@ -29,29 +28,41 @@ pub(crate) struct ObjFile {
 /// `mtl` reads the `mtllib` files; otherwise they are only checked for existence, since a
 /// Mitsuba scene gives the materials itself. A missing material library is a warning.
 pub(crate) fn read_obj(path: &Path, mtl: bool) -> Result<ObjFile, SceneError> {
-    let file = std::fs::File::open(path).map_err(|e| {
-        let hint = if path.exists() { e.to_string() } else { "mesh file not found".into() };
-        SceneError::new(path, None, format!("{hint}: check the path in the scene file"))
-    })?;
+    let bytes = hush_io::read_limited_bare(path, crate::max_file_bytes())
+        .map_err(|e| SceneError::new(path, None, format!("mesh file: {e}: check the path in the scene file")))?;
     let options = tobj::LoadOptions { single_index: true, triangulate: true, ignore_points: true, ignore_lines: true };
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
     let warnings = std::cell::RefCell::new(Vec::new());
-    let (models, materials) = tobj::load_obj_buf(&mut BufReader::new(file), &options, |lib| {
+    let (models, materials) = tobj::load_obj_buf(&mut std::io::Cursor::new(bytes), &options, |lib| {
         let full = dir.join(lib);
-        if !full.is_file() {
+        if let Some(why) = hush_io::describe_unreadable(&full) {
             let used = if mtl {
                 "its objects get Mitsuba's default diffuse 0.5"
             } else {
                 "not needed: the scene file gives the BSDF"
             };
             warnings.borrow_mut().push(format!(
-                "{}: material library '{}' is missing ({used})",
+                "{}: material library '{}' {} ({used})",
                 path.display(),
-                lib.display()
+                lib.display(),
+                if why == "no such file" { "is missing".to_string() } else { why }
             ));
             return Ok((Vec::new(), Default::default()));
         }
-        if mtl { tobj::load_mtl(&full) } else { Ok((Vec::new(), Default::default())) }
+        if !mtl {
+            return Ok((Vec::new(), Default::default()));
+        }
+        match hush_io::read_limited_bare(&full, crate::max_file_bytes()) {
+            Ok(text) => tobj::load_mtl_buf(&mut std::io::Cursor::new(text)),
+            Err(e) => {
+                warnings.borrow_mut().push(format!(
+                    "{}: material library '{}' cannot be read: {e} (its objects get Mitsuba's default diffuse 0.5)",
+                    path.display(),
+                    lib.display()
+                ));
+                Ok((Vec::new(), Default::default()))
+            }
+        }
     })
     .map_err(|e| SceneError::new(path, None, format!("malformed OBJ: {e}")))?;
     let materials =
@@ -235,7 +246,7 @@ pub(crate) fn mtl_material(
     let mut diffuse: Reflectance = kd.clamp(Vec3::ZERO, Vec3::ONE).into();
     if let Some(t) = &m.diffuse_texture {
         let file: PathBuf = dir.join(t.trim());
-        match textures.get(&file, false) {
+        match crate::check_inside(&file, dir).and_then(|()| textures.get(&file, false)) {
             Ok(id) => diffuse = Reflectance::Texture(id),
             Err(e) => warnings.push(at(format!("{e}; Kd is used instead"))),
         }

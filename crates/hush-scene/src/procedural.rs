@@ -100,7 +100,8 @@ pub struct GeneratorOptions {
     pub width: u32,
     pub height: u32,
     /// A folder of scenes (such as `../shared/scenes`): small OBJ meshes below its `*/models/` folders
-    /// may be placed as furniture, referenced by absolute path. Ignored when the folder is absent.
+    /// may be placed as furniture, each copied beside the scene as an asset (`borrowed-<k>.obj`, its `mtllib`
+    /// lines dropped). Ignored when the folder is absent.
     pub borrow_meshes: Option<PathBuf>,
 }
 
@@ -895,7 +896,16 @@ impl<'a> Gen<'a> {
         let centre = (lo + hi) * 0.5;
         let mut t = format!("<translate value=\"{}\"/>", v3(Vec3::new(-centre.x, -lo.y, -centre.z)));
         t.push_str(&Self::placed(Vec3::splat(s), angle, Vec3::new(x, 0.0, z)));
-        let extra = format!("<string name=\"filename\" value=\"{}\"/>", xml_escape(&path.display().to_string()));
+        // The mesh travels with the scene as an asset, since a scene reads only files of its own folder. Its
+        // `mtllib` lines are dropped: the scene gives the BSDF.
+        let file = format!("borrowed-{k}.obj");
+        if !self.assets.iter().any(|a| a.file == file) {
+            let Ok(text) = std::fs::read_to_string(&path) else { return };
+            let obj: String =
+                text.lines().filter(|l| !l.trim_start().starts_with("mtllib")).flat_map(|l| [l, "\n"]).collect();
+            self.assets.push(Asset { file: file.clone(), bytes: obj.into_bytes() });
+        }
+        let extra = format!("<string name=\"filename\" value=\"{file}\"/>");
         self.shape("obj", "borrowed", &t, &m, &extra, None);
     }
 
@@ -937,10 +947,6 @@ impl<'a> Gen<'a> {
             self.lights.push(LightKind::EnvMap);
         }
     }
-}
-
-fn xml_escape(s: &str) -> String {
-    s.replace('&', "&amp;").replace('"', "&quot;").replace('<', "&lt;").replace('>', "&gt;")
 }
 
 /// An 8-bit RGB PNG in memory.

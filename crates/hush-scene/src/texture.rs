@@ -22,53 +22,74 @@ pub(crate) fn srgb_to_linear(c: f32) -> f32 {
 /// `bitmap` default: `raw = false`) and are converted to linear; EXR and other float images
 /// are linear already. Alpha is dropped. Errors name the file.
 pub(crate) fn read_image(path: &Path, raw: bool) -> Result<Pixels, String> {
-    if !path.is_file() {
-        return Err(format!("image file not found: {}: check the path in the scene file", path.display()));
+    if let Some(why) = hush_io::describe_unreadable(path) {
+        return Err(format!("image file {}: {why}: check the path in the scene file", path.display()));
     }
     let is_exr = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr"));
     let pixels = if is_exr {
         read_exr(path)?
     } else {
-        let img = image::ImageReader::open(path)
-            .and_then(|r| r.with_guessed_format())
-            .map_err(|e| format!("cannot read image {}: {e}", path.display()))?
-            .decode()
-            .map_err(|e| format!("cannot decode image {}: {e} (hush reads PNG, JPEG and EXR)", path.display()))?;
-        let (width, height) = (img.width(), img.height());
-        let data = match img.color() {
-            image::ColorType::Rgb32F | image::ColorType::Rgba32F => img.to_rgb32f().into_raw(),
-            image::ColorType::L8 | image::ColorType::La8 | image::ColorType::Rgb8 | image::ColorType::Rgba8 => {
-                let lut: Vec<f32> =
-                    (0..256).map(|i| if raw { i as f32 / 255.0 } else { srgb_to_linear(i as f32 / 255.0) }).collect();
-                img.to_rgb8().into_raw().into_iter().map(|v| lut[v as usize]).collect()
-            }
-            _ => {
-                let mut d = img.to_rgb32f().into_raw();
-                if !raw {
-                    d.iter_mut().for_each(|v| *v = srgb_to_linear(*v));
-                }
-                d
-            }
-        };
-        Pixels { width, height, data }
+        let bytes = hush_io::read_limited(path, crate::max_file_bytes(), "image file").map_err(|e| e.to_string())?;
+        decode_image(&bytes, &path.display().to_string(), raw)?
     };
+    finish(pixels, &path.display().to_string())
+}
+
+/// Decodes a PNG or JPEG held in memory (a glTF's embedded image); `label` names it in errors. The
+/// declared size is checked against [`MAX_TEXTURE_PIXELS`] before any pixel is decoded.
+pub(crate) fn decode_image(bytes: &[u8], label: &str, raw: bool) -> Result<Pixels, String> {
+    use image::ImageDecoder;
+    let decoder = image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| format!("cannot read image {label}: {e}"))?
+        .into_decoder()
+        .map_err(|e| format!("cannot decode image {label}: {e} (hush reads PNG, JPEG and EXR)"))?;
+    let (w, h) = decoder.dimensions();
+    if u64::from(w) * u64::from(h) > MAX_TEXTURE_PIXELS {
+        return Err(format!(
+            "image {label}: it declares {w}x{h} pixels, above the limit of {MAX_TEXTURE_PIXELS} for a texture; \
+             refused before decoding (resize the image)"
+        ));
+    }
+    let img = image::DynamicImage::from_decoder(decoder)
+        .map_err(|e| format!("cannot decode image {label}: {e} (hush reads PNG, JPEG and EXR)"))?;
+    let (width, height) = (img.width(), img.height());
+    let data = match img.color() {
+        image::ColorType::Rgb32F | image::ColorType::Rgba32F => img.to_rgb32f().into_raw(),
+        image::ColorType::L8 | image::ColorType::La8 | image::ColorType::Rgb8 | image::ColorType::Rgba8 => {
+            let lut: Vec<f32> =
+                (0..256).map(|i| if raw { i as f32 / 255.0 } else { srgb_to_linear(i as f32 / 255.0) }).collect();
+            img.to_rgb8().into_raw().into_iter().map(|v| lut[v as usize]).collect()
+        }
+        _ => {
+            let mut d = img.to_rgb32f().into_raw();
+            if !raw {
+                d.iter_mut().for_each(|v| *v = srgb_to_linear(*v));
+            }
+            d
+        }
+    };
+    Ok(Pixels { width, height, data })
+}
+
+/// Checks decoded pixels: finite and not empty.
+fn finish(pixels: Pixels, label: &str) -> Result<Pixels, String> {
     if let Some(i) = pixels.data.iter().position(|v| !v.is_finite()) {
         let px = i / 3;
         return Err(format!(
-            "image {} has a non-finite value at pixel ({}, {}): fix the file",
-            path.display(),
+            "image {label} has a non-finite value at pixel ({}, {}): fix the file",
             px % pixels.width as usize,
             px / pixels.width as usize
         ));
     }
     if pixels.width == 0 || pixels.height == 0 {
-        return Err(format!("image {} is empty", path.display()));
+        return Err(format!("image {label} is empty"));
     }
     Ok(pixels)
 }
 
-/// The most pixels of an EXR texture or environment map: 2^28 (a 16384² map is 2^28), as 3 f32 each 3 GiB.
-const MAX_EXR_PIXELS: u64 = 1 << 28;
+/// The most pixels of a texture or environment map: 2^28 (a 16384² map is 2^28), as 3 f32 each 3 GiB.
+pub(crate) const MAX_TEXTURE_PIXELS: u64 = 1 << 28;
 
 fn read_exr(path: &Path) -> Result<Pixels, String> {
     use exr::prelude::*;
@@ -77,9 +98,9 @@ fn read_exr(path: &Path) -> Result<Pixels, String> {
         .map_err(|e| format!("image {}: reading its EXR header failed: {e}", path.display()))?;
     for header in &meta.headers {
         let (w, h) = (header.layer_size.width() as u64, header.layer_size.height() as u64);
-        if w.saturating_mul(h) > MAX_EXR_PIXELS {
+        if w.saturating_mul(h) > MAX_TEXTURE_PIXELS {
             return Err(format!(
-                "image {}: its EXR header declares {w}x{h} pixels, above the limit of {MAX_EXR_PIXELS} for a texture \
+                "image {}: its EXR header declares {w}x{h} pixels, above the limit of {MAX_TEXTURE_PIXELS} for a texture \
                  or environment map; refused before decoding (resize the image)",
                 path.display()
             ));

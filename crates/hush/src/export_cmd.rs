@@ -15,7 +15,8 @@ pub struct ExportArgs {
 }
 
 pub fn run(args: ExportArgs) -> Result<()> {
-    let bytes = std::fs::read(&args.model).with_context(|| format!("reading {}", args.model.display()))?;
+    let bytes =
+        hush_pipeline::read_weight_file(&args.model).with_context(|| format!("reading {}", args.model.display()))?;
     let (net, info) = hush_net::load_model(&bytes, &candle_core::Device::Cpu)
         .with_context(|| format!("loading model {}", args.model.display()))?;
     let tza = net.export_tza().with_context(|| format!("exporting {}", args.model.display()))?;

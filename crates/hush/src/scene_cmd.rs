@@ -1,5 +1,7 @@
 //! `hush scene generate`: a seeded procedural scene (hush-pipeline's `procedural`), written atomically with
 //! its assets and probed on the GPU, so that no scene whose camera sees nothing lit is ever written.
+//! `hush scene check`: a scene file loaded as `hush render` loads it, without a GPU: its warnings, what it
+//! holds, or the error that names what is wrong.
 
 use std::path::PathBuf;
 
@@ -22,6 +24,15 @@ pub enum SceneAction {
     /// Write a seeded procedural scene (Mitsuba 3 XML and its assets): a room with openings, furniture,
     /// random materials and lights. The same seed gives the same scene.
     Generate(GenerateArgs),
+    /// Load a scene file (Mitsuba XML, OBJ, glTF) as `hush render` does, without a GPU: print its warnings
+    /// and what it holds, or fail with the error that names what is wrong.
+    Check(CheckArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct CheckArgs {
+    /// Scene file.
+    pub scene: PathBuf,
 }
 
 #[derive(Args, Debug)]
@@ -45,7 +56,29 @@ pub struct GenerateArgs {
 pub fn run(args: SceneArgs) -> Result<()> {
     match args.action {
         SceneAction::Generate(a) => generate(a),
+        SceneAction::Check(a) => check(a),
     }
+}
+
+fn check(args: CheckArgs) -> Result<()> {
+    let scene = hush_scene::Scene::load(&args.scene)?;
+    for w in &scene.warnings {
+        eprintln!("warning: {w}");
+    }
+    let lights = scene.meshes.iter().filter(|m| m.emission.is_some()).count();
+    println!(
+        "{}: {} shapes, {} triangles, {} textures, {lights} emitting shapes{}, {}×{} film, max_depth {}, {} warnings",
+        args.scene.display(),
+        scene.meshes.len(),
+        scene.triangle_count(),
+        scene.textures.len(),
+        if scene.environment.is_some() { " and an environment" } else { "" },
+        scene.film.width,
+        scene.film.height,
+        scene.max_depth,
+        scene.warnings.len()
+    );
+    Ok(())
 }
 
 fn generate(args: GenerateArgs) -> Result<()> {

@@ -325,6 +325,21 @@ impl Sweep {
     }
 }
 
+/// The sweep fuzz target (`cargo xtask fuzz sweep`): `text` as a sweep file and as a scales file, and
+/// the runs of the sweep at each of the repository's scales. Returns whether the sweep parsed.
+#[cfg(any(test, fuzzing))]
+pub fn fuzz_entry(text: &str, scales: &[Scale]) -> bool {
+    let file = Path::new("fuzz.toml");
+    let _ = parse_scales(text, file);
+    let Ok(sweep) = parse_sweep("fuzz", text, file) else { return false };
+    for scale in scales {
+        for run in sweep.runs(scale) {
+            let _ = flags(&run.train);
+        }
+    }
+    true
+}
+
 /// The sweep definitions folder.
 pub fn sweeps_dir() -> PathBuf {
     crate::util::project_root().join("data/sweeps")
@@ -406,6 +421,30 @@ variants = [{ name = "const", schedule = "constant" }, { name = "cosine", schedu
 
     fn scales() -> Vec<Scale> {
         parse_scales(SCALES_TOML, Path::new("scales.toml")).unwrap()
+    }
+
+    /// The sweep fuzz target's kept cases (`tests/fuzz/regressions/sweep/`) and the repository's sweeps,
+    /// replayed as `cargo xtask fuzz sweep` ran them: none panics, and every real sweep parses.
+    #[test]
+    fn fuzz_regressions_replay() {
+        let root = crate::util::project_root();
+        let scales = load_scales_file(&root.join("data/sweeps/scales.toml"));
+        let mut replayed = 0;
+        for dir in ["tests/fuzz/regressions/sweep", "data/sweeps"] {
+            let Ok(entries) = std::fs::read_dir(root.join(dir)) else { continue };
+            for file in entries.flatten().map(|e| e.path()) {
+                let text = std::fs::read_to_string(&file).unwrap_or_default();
+                let parsed = fuzz_entry(&text, &scales);
+                let is_sweep = dir == "data/sweeps" && !file.ends_with("scales.toml");
+                assert!(parsed || !is_sweep, "{} does not parse", file.display());
+                replayed += 1;
+            }
+        }
+        assert!(replayed >= 5, "{replayed} files replayed");
+    }
+
+    fn load_scales_file(file: &Path) -> Vec<Scale> {
+        parse_scales(&std::fs::read_to_string(file).unwrap(), file).unwrap()
     }
 
     #[test]

@@ -169,6 +169,12 @@ pub fn build(plan: &DatasetPlan, renderer: &Renderer, observer: &dyn Observer) -
     plan.validate()?;
     let out = &plan.out;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    // One run writes a folder (or a shard of it) at a time; a second is refused rather than interleaved.
+    let lock = match plan.shard {
+        Some((i, n)) => out.join(format!(".hush-dataset-shard-{i}-of-{n}.lock")),
+        None => out.join(".hush-dataset.lock"),
+    };
+    let _lock = hush_io::lock_folder(&lock, "`hush dataset`")?;
     let layout = Layout::new(out);
     let procedural = match plan.procedural {
         0 => None,

@@ -29,7 +29,7 @@ impl Denoiser {
     /// color only, 6 color + albedo, 9 color + albedo + normal; the network kind comes from its tensor names and
     /// shapes.
     pub fn load(path: &Path) -> Result<Denoiser> {
-        let bytes = std::fs::read(path).with_context(|| format!("reading model {}", path.display()))?;
+        let bytes = crate::read_weight_file(path).with_context(|| format!("reading model {}", path.display()))?;
         let is_tza = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("tza"));
         Denoiser::from_bytes(&bytes, is_tza).with_context(|| format!("loading model {}", path.display()))
     }

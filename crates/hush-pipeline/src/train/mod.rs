@@ -71,6 +71,10 @@ pub fn run(options: TrainOptions, observer: &dyn Observer) -> Result<TrainOutcom
         bail!("--resume {} and --out {} name different folders; give one", r.display(), o.display());
     }
     let folder = RunFolder::new(&out);
+    // One `hush train` writes a run folder at a time: a second is refused rather than interleaved. A new
+    // folder is locked once it is made, after the checks that write nothing.
+    let lock_run = || hush_io::lock_folder(&out.join(".hush-train.lock"), "`hush train`");
+    let early_lock = if out.is_dir() { Some(lock_run()?) } else { None };
     // With --resume the run folder's config.json supplies every option not given.
     let stored = folder.read_config()?;
     if stored.is_none()
@@ -109,7 +113,7 @@ pub fn run(options: TrainOptions, observer: &dyn Observer) -> Result<TrainOutcom
                     problems.join("; ")
                 );
             }
-            Some(std::fs::read(&last).with_context(|| format!("reading {}", last.display()))?)
+            Some(crate::read_weight_file(&last).with_context(|| format!("reading {}", last.display()))?)
         }
         _ if args.resume.is_some() => bail!("--resume {}: it has no checkpoints/last.safetensors yet", out.display()),
         _ => None,
@@ -152,6 +156,10 @@ pub fn run(options: TrainOptions, observer: &dyn Observer) -> Result<TrainOutcom
     let load_seconds = loading.elapsed().as_secs_f64();
     let checkpoints = folder.checkpoints();
     std::fs::create_dir_all(&checkpoints).with_context(|| format!("creating {}", checkpoints.display()))?;
+    let _lock = match early_lock {
+        Some(lock) => lock,
+        None => lock_run()?,
+    };
     write_file(&folder.config(), serde_json::to_string_pretty(&cfg)?.as_bytes())?;
 
     let (mut log, mut metrics) = (Vec::new(), Vec::new());

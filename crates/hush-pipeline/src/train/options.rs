@@ -284,7 +284,7 @@ pub fn read_init(init: &Path, features: Option<&InputFeatures>) -> Result<(Pretr
             (official.method_name(), std::borrow::Cow::Borrowed(official.bytes))
         }
         _ => {
-            let bytes = std::fs::read(init).with_context(|| {
+            let bytes = crate::read_weight_file(init).with_context(|| {
                 format!("reading --init {} (a .tza or .safetensors file, or `{INIT_OIDN}`)", init.display())
             })?;
             (init.display().to_string(), std::borrow::Cow::Owned(bytes))

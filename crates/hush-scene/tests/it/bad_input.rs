@@ -128,7 +128,7 @@ fn missing_texture_is_a_warning_naming_it() {
         &dir,
         r#"<shape type="cube"><bsdf type="diffuse"><texture type="bitmap" name="reflectance"><string name="filename" value="tex/gone.png"/></texture></bsdf></shape>"#,
     );
-    assert_warned(&w, &["gone.png", "not found", "0.5 grey"]);
+    assert_warned(&w, &["gone.png", "no such file", "0.5 grey"]);
 }
 
 #[test]

@@ -133,3 +133,25 @@ fn bvh_matches_brute_force_on_the_cornell_box() {
         scene.meshes.iter().flat_map(|m| m.indices.iter().map(|t| t.map(|i| m.positions[i as usize]))).collect();
     check(&tris, 2000, 4);
 }
+
+/// Centroids spaced ever more widely along each axis (each 16× the last, on both sides) make the SAH
+/// peel one triangle at a time; the builder then splits ranges in half from `MAX_SAH_DEPTH` on, so the
+/// tree (and the recursion that builds it) stays shallow. Without that bound this input is 126 deep.
+#[test]
+fn bvh_depth_is_bounded_on_ever_wider_spacing() {
+    let mut tris = Vec::new();
+    for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
+        for sign in [1.0f32, -1.0] {
+            for k in 0..31 {
+                let c = axis * sign * 16f32.powi(k);
+                tris.push([c, c + Vec3::X * 0.01, c + Vec3::Y * 0.01]);
+            }
+        }
+    }
+    let bvh = Bvh::build(&tris);
+    // MAX_SAH_DEPTH (48) levels, then halving 186 triangles into leaves of up to 4: at most 48 + 6.
+    assert_eq!(hush_scene::MAX_SAH_DEPTH, 48);
+    assert!(bvh.depth() <= 54, "depth {}", bvh.depth());
+    let in_leaves: u32 = bvh.nodes.iter().map(|n| n.count).sum();
+    assert_eq!(in_leaves as usize, tris.len(), "every triangle in one leaf");
+}

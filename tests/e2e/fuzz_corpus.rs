@@ -1,0 +1,42 @@
+//! Every kept fuzz input (`tests/fuzz/regressions/<target>/`: the inputs that once crashed, hung or ran out
+//! of memory, each fixed) and every seed (`tests/fuzz/seeds/<target>/`) replayed through the same code the
+//! fuzzer ran (`tests/fuzz/targets.rs`): none may panic. `cargo xtask fuzz` finds new ones.
+
+use std::path::Path;
+
+use crate::fuzz_targets::{TARGETS, run};
+
+fn files(dir: &Path) -> Vec<std::path::PathBuf> {
+    let mut out: Vec<_> = std::fs::read_dir(dir)
+        .map(|d| d.flatten().map(|e| e.path()).filter(|p| p.is_file()).collect())
+        .unwrap_or_default();
+    out.sort();
+    out
+}
+
+#[test]
+fn fuzz_regressions_and_seeds_replay_without_a_panic() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/fuzz");
+    let mut replayed = 0;
+    let mut failures = Vec::new();
+    for (target, _) in TARGETS {
+        for kind in ["regressions", "seeds"] {
+            for file in files(&root.join(kind).join(target)) {
+                let bytes = std::fs::read(&file).unwrap();
+                let outcome = std::panic::catch_unwind(|| run(target, &bytes));
+                match outcome {
+                    Ok(accepted) => {
+                        // A seed is a valid file: the loader must accept it (a fixture that rots is caught here).
+                        if kind == "seeds" && !accepted {
+                            failures.push(format!("{target}: seed {} is refused", file.display()));
+                        }
+                    }
+                    Err(_) => failures.push(format!("{target}: {} panics", file.display())),
+                }
+                replayed += 1;
+            }
+        }
+    }
+    assert!(replayed >= 10, "only {replayed} inputs found under {}", root.display());
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
