@@ -9,6 +9,7 @@ mod bench_net;
 mod cuda_check;
 mod demo;
 mod eval;
+mod faults;
 mod fuzz;
 mod hostile;
 mod mitsuba;
@@ -68,6 +69,9 @@ tasks:
   hostile [--release]        hush against crafted files (huge headers, endless files, loops, deep nesting, a
                              32768² render) under /usr/bin/time and prlimit: each a clear error or a named
                              warning, under 100 MB of peak memory; the table in target/hostile/summary.json
+  faults [--release]         (root) the disk filling during a dataset, a training run and a report, and a
+                             read-only output folder, on a small tmpfs: a clear error each, then a resume that
+                             keeps every complete file; the table in target/faults/summary.json
   cuda-check                 check that the `cuda` feature compiles (hush, hush-net, hush-train, all targets)
                              with NVIDIA's nvcc from PyPI in target/cuda-venv, into target/cuda-check; no GPU
                              needed (heavy: 10 to 12 minutes cold on 2 cores; run by hand before releases)
@@ -89,6 +93,7 @@ fn main() -> ExitCode {
         Some("cuda-check") => cuda_check::run(&args[1..]),
         Some("fuzz") => fuzz::run(&args[1..]),
         Some("hostile") => hostile::run(&args[1..]),
+        Some("faults") => faults::run(&args[1..]),
         _ => Err(format!("{USAGE}{}", sweep::USAGE)),
     };
     match result {
