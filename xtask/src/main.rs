@@ -14,6 +14,7 @@ mod fuzz;
 mod hostile;
 mod mitsuba;
 mod procedural;
+mod soak;
 mod sweep;
 mod test;
 mod train_check;
@@ -72,6 +73,9 @@ tasks:
   faults [--release]         (root) the disk filling during a dataset, a training run and a report, and a
                              read-only output folder, on a small tmpfs: a clear error each, then a resume that
                              keeps every complete file; the table in target/faults/summary.json
+  soak [--kills N] [--seed S] [--release]
+                             dataset → train → the tiny loss sweep, SIGKILLed N times (default 20) at random
+                             moments and resumed: every output complete and equal to an uninterrupted run's
   cuda-check                 check that the `cuda` feature compiles (hush, hush-net, hush-train, all targets)
                              with NVIDIA's nvcc from PyPI in target/cuda-venv, into target/cuda-check; no GPU
                              needed (heavy: 10 to 12 minutes cold on 2 cores; run by hand before releases)
@@ -94,6 +98,7 @@ fn main() -> ExitCode {
         Some("fuzz") => fuzz::run(&args[1..]),
         Some("hostile") => hostile::run(&args[1..]),
         Some("faults") => faults::run(&args[1..]),
+        Some("soak") => soak::run(&args[1..]),
         _ => Err(format!("{USAGE}{}", sweep::USAGE)),
     };
     match result {
