@@ -142,19 +142,54 @@ fn read_buffers(path: &Path, doc: &gltf::Document, mut blob: Option<Vec<u8>>) ->
     Ok(out)
 }
 
+/// A GLB's 12-byte header (magic, version, length) is whole and declares at least itself.
+fn check_glb_header(bytes: &[u8]) -> Result<(), String> {
+    if !bytes.starts_with(b"glTF") {
+        return Ok(());
+    }
+    let declared = bytes.get(8..12).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+    match declared {
+        None => Err(format!("the GLB header is truncated ({} bytes of 12)", bytes.len())),
+        Some(n) if n < 12 => Err(format!("the GLB header declares a length of {n} bytes, less than the header itself")),
+        Some(_) => Ok(()),
+    }
+}
+
+/// Every primitive's attributes and indices name accessors that exist.
+fn check_attribute_accessors(root: &gltf::json::Root) -> Result<(), String> {
+    let count = root.accessors.len();
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, prim) in mesh.primitives.iter().enumerate() {
+            let named = prim.attributes.values().map(|a| a.value()).chain(prim.indices.iter().map(|a| a.value()));
+            if let Some(bad) = named.into_iter().find(|&i| i >= count) {
+                return Err(format!("mesh {m} primitive {p} names accessor {bad}, but the file has {count} accessors"));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// The deepest node hierarchy walked (the walk recurses); real files nest a few dozen levels at most.
 const MAX_NODE_DEPTH: usize = 256;
 
 pub(crate) fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
     let bytes = hush_io::read_limited_bare(path, crate::max_file_bytes())
         .map_err(|e| SceneError::new(path, None, format!("cannot read the scene file: {e}")))?;
-    // gltf 1.4 panics on some malformed files (an out-of-range index in its own validation, found by
-    // fuzzing): such a panic is this file's error, not the process's end.
-    let parsed = std::panic::catch_unwind(|| gltf::Gltf::from_slice(&bytes))
-        .map_err(|p| SceneError::new(path, None, format!("malformed glTF ({})", panic_text(&p))))?
-        .map_err(|e| SceneError::new(path, None, format!("cannot load glTF: {e}")))?;
-    let doc = parsed.document.clone();
-    let buffers = read_buffers(path, &doc, parsed.blob)?;
+    let fail = |m: String| SceneError::new(path, None, m);
+    // gltf 1.4 panics on two kinds of malformed file that fuzzing found: a GLB header whose length is
+    // below its own 12 bytes (an underflow), and a POSITION attribute naming an accessor that does not
+    // exist (an index in its validation). Both are refused here first; any other panic of the crate is
+    // still this file's error, not the process's end.
+    check_glb_header(&bytes).map_err(fail)?;
+    let loaded = std::panic::catch_unwind(|| -> Result<(gltf::Document, Option<Vec<u8>>), String> {
+        let invalid = |e: gltf::Error| format!("cannot load glTF: {e}");
+        let parsed = gltf::Gltf::from_slice_without_validation(&bytes).map_err(invalid)?;
+        check_attribute_accessors(parsed.document.as_json())?;
+        let blob = parsed.blob;
+        Ok((gltf::Document::from_json(parsed.document.into_json()).map_err(invalid)?, blob))
+    });
+    let (doc, blob) = loaded.map_err(|p| fail(format!("malformed glTF ({})", panic_text(&p))))?.map_err(fail)?;
+    let buffers = read_buffers(path, &doc, blob)?;
     let images = doc.images().map(|_| None).collect();
     let mut loader = Loader {
         path,
