@@ -71,15 +71,22 @@ pub enum Augment {
     /// As `Flips`, plus OIDN's channel permutations: one random RGB permutation shared by the color, the
     /// reflectance features and the target, another for the normal's xyz.
     FlipsPermute,
+    /// All of OIDN's training toolkit (`TrainingDataset` in its `dataset.py`): as `FlipsPermute`, plus one
+    /// crop in ten shrunk by 0 to 15 pixels on each side and zero-padded at its bottom and right after the
+    /// flips (so that the network sees the padding an image whose sides are not multiples of 16 gets), and,
+    /// where there are auxiliary features, one crop in a hundred with its color and target zeroed (so that a
+    /// black image stays black instead of ghosting its features).
+    Oidn,
 }
 
 impl Augment {
-    /// `crop`/`none`, `flips`, `full`/`oidn`/`flips_permute`.
+    /// `crop`/`none`, `flips`, `full`/`flips_permute`, `oidn`.
     pub fn parse(name: &str) -> Option<Self> {
         Some(match name {
             "crop" | "none" => Augment::Crop,
             "flips" | "flip" => Augment::Flips,
-            "full" | "oidn" | "flips_permute" => Augment::FlipsPermute,
+            "full" | "flips_permute" => Augment::FlipsPermute,
+            "oidn" => Augment::Oidn,
             _ => return None,
         })
     }
@@ -98,7 +105,15 @@ pub struct Crop {
     pub color_perm: u8,
     /// Index into [`PERMUTATIONS`] of the normal's channels.
     pub normal_perm: u8,
+    /// Pixels the crop lacks of the crop size along x and y of the image (0 to 15: OIDN's shrunk crops);
+    /// the tile is zero-padded at its bottom and right after the orientation is applied.
+    pub shrink: [u8; 2],
+    /// Whether the color input and the target are zeroed (OIDN's black samples).
+    pub zeroed: bool,
 }
+
+/// The most pixels a shrunk crop lacks on a side, plus one (OIDN's `max_padding`).
+const MAX_PADDING: u64 = 16;
 
 impl std::fmt::Display for Crop {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -120,6 +135,8 @@ pub(crate) struct Sampler {
     sizes: Vec<(usize, usize)>,
     crop: usize,
     augment: Augment,
+    /// Whether the input has auxiliary features (OIDN zeroes samples only then).
+    aux: bool,
     /// The shuffled order of one pass, cached.
     order: (u64, Vec<usize>),
 }
@@ -127,7 +144,8 @@ pub(crate) struct Sampler {
 impl Sampler {
     pub fn new(seed: u64, samples: &[TrainSample], crop: usize, augment: Augment) -> Self {
         let sizes = samples.iter().map(|s| (s.input.width, s.input.height)).collect();
-        Sampler { seed, sizes, crop, augment, order: (u64::MAX, Vec::new()) }
+        let aux = samples.first().is_some_and(|s| s.input.channels > 3);
+        Sampler { seed, sizes, crop, augment, aux, order: (u64::MAX, Vec::new()) }
     }
 
     /// The crop drawn `k`-th (0-based) in the run.
@@ -145,14 +163,22 @@ impl Sampler {
         let sample = self.order.1[(k % n) as usize];
         let (w, h) = self.sizes[sample];
         let mut rng = SplitMix64::keyed(self.seed, k);
-        let x = rng.below((w - self.crop + 1) as u64) as usize;
-        let y = rng.below((h - self.crop + 1) as u64) as usize;
+        // Drawn before the window (which depends on it) only in the mode that has it, so that every other
+        // mode draws exactly the sequence it always did.
+        let shrink = match self.augment {
+            Augment::Oidn if rng.next_f64() < 0.1 => [rng.below(MAX_PADDING) as u8, rng.below(MAX_PADDING) as u8],
+            _ => [0, 0],
+        };
+        let (cw, ch) = (self.crop - shrink[0] as usize, self.crop - shrink[1] as usize);
+        let x = rng.below((w - cw + 1) as u64) as usize;
+        let y = rng.below((h - ch + 1) as u64) as usize;
         let (orientation, color_perm, normal_perm) = match self.augment {
             Augment::Crop => (0, 0, 0),
             Augment::Flips => (rng.below(8) as u8, 0, 0),
-            Augment::FlipsPermute => (rng.below(8) as u8, rng.below(6) as u8, rng.below(6) as u8),
+            Augment::FlipsPermute | Augment::Oidn => (rng.below(8) as u8, rng.below(6) as u8, rng.below(6) as u8),
         };
-        Crop { sample, x, y, orientation, color_perm, normal_perm }
+        let zeroed = self.augment == Augment::Oidn && self.aux && rng.next_f64() < 0.01;
+        Crop { sample, x, y, orientation, color_perm, normal_perm, shrink, zeroed }
     }
 
     /// The crops of 1-based optimizer step `step` with `batch` crops per step.
@@ -196,21 +222,135 @@ pub(crate) fn gather(
         let im = pick(&samples[crop.sample], target);
         let sources = channel_sources(features, crop, target);
         let item = &mut data[b * channels * plane..(b + 1) * channels * plane];
-        for oy in 0..size {
-            for ox in 0..size {
-                let (mut sx, mut sy) = if crop.orientation & 4 != 0 { (oy, ox) } else { (ox, oy) };
+        // The window in the image, and the tile it fills after the orientation; the rest stays zero.
+        let (cw, ch) = (size - crop.shrink[0] as usize, size - crop.shrink[1] as usize);
+        let transposed = crop.orientation & 4 != 0;
+        let (tw, th) = if transposed { (ch, cw) } else { (cw, ch) };
+        // A zeroed sample keeps only its auxiliary features.
+        let first = if crop.zeroed { if target { channels } else { 3 } } else { 0 };
+        for oy in 0..th {
+            for ox in 0..tw {
+                let (mut sx, mut sy) = if transposed { (oy, ox) } else { (ox, oy) };
                 if crop.orientation & 1 != 0 {
-                    sx = size - 1 - sx;
+                    sx = cw - 1 - sx;
                 }
                 if crop.orientation & 2 != 0 {
-                    sy = size - 1 - sy;
+                    sy = ch - 1 - sy;
                 }
                 let src = ((crop.y + sy) * im.width + crop.x + sx) * channels;
-                for (c, &from) in sources.iter().enumerate() {
+                for (c, &from) in sources.iter().enumerate().skip(first) {
                     item[c * plane + oy * size + ox] = im.data[src + from];
                 }
             }
         }
     }
     data
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A sample whose input channel c of pixel (x, y) holds 1 + c + 10 x + 1000 y (never 0), and whose
+    /// target holds the same for its 3 channels.
+    fn sample(w: usize, h: usize, channels: usize) -> TrainSample {
+        let image = |channels: usize| Image {
+            width: w,
+            height: h,
+            channels,
+            data: (0..w * h * channels)
+                .map(|i| {
+                    let (px, c) = (i / channels, i % channels);
+                    (1 + c + 10 * (px % w) + 1000 * (px / w)) as f32
+                })
+                .collect(),
+        };
+        TrainSample { input: image(channels), target: image(3) }
+    }
+
+    #[test]
+    fn other_modes_draw_the_crops_they_always_did() {
+        // The first crops of seed 7 at 32² from a 64² image, as the sampler drew them before the `oidn` mode
+        // existed (window x, y, orientation, colour and normal permutations; checked against an independent
+        // SplitMix64): a change to the stream would change every run and break every resume.
+        let samples = vec![sample(64, 64, 9)];
+        let mut s = Sampler::new(7, &samples, 32, Augment::FlipsPermute);
+        let drawn: Vec<(usize, usize, u8, u8, u8)> =
+            (0..3).map(|k| s.crop(k)).map(|c| (c.x, c.y, c.orientation, c.color_perm, c.normal_perm)).collect();
+        assert_eq!(drawn, [(20, 11, 1, 0, 3), (27, 16, 5, 3, 1), (6, 10, 7, 2, 2)]);
+        assert!((0..100).map(|k| s.crop(k)).all(|c| c.shrink == [0, 0] && !c.zeroed));
+    }
+
+    #[test]
+    fn oidn_mode_shrinks_one_crop_in_ten_and_zeroes_one_in_a_hundred() {
+        let n = 4000;
+        let with_aux = vec![sample(64, 64, 9)];
+        let mut s = Sampler::new(3, &with_aux, 32, Augment::Oidn);
+        let crops: Vec<Crop> = (0..n).map(|k| s.crop(k)).collect();
+        let shrunk = crops.iter().filter(|c| c.shrink != [0, 0]).count();
+        let zeroed = crops.iter().filter(|c| c.zeroed).count();
+        // Binomial: 10 % of 4000 is 400 ± 19 (one sd; 1/16 of the shrunk draws are [0, 0]: 375 expected), 1 %
+        // is 40 ± 6.3; the bounds are over 4 sd wide.
+        assert!((295..=455).contains(&shrunk), "{shrunk} shrunk crops of {n}");
+        assert!((15..=66).contains(&zeroed), "{zeroed} zeroed crops of {n}");
+        assert!(crops.iter().all(|c| c.shrink.iter().all(|&p| u64::from(p) < MAX_PADDING)));
+        let color_only = vec![sample(64, 64, 3)];
+        let mut s = Sampler::new(3, &color_only, 32, Augment::Oidn);
+        assert!((0..n).all(|k| !s.crop(k).zeroed), "a sample without auxiliary features is never zeroed");
+    }
+
+    #[test]
+    fn a_shrunk_crop_is_zero_padded_at_the_bottom_and_right_after_its_orientation() {
+        let samples = vec![sample(40, 40, 9)];
+        let features = InputFeatures::parse("alb,nrm").unwrap();
+        let size = 16;
+        for orientation in 0..8u8 {
+            let crop = Crop {
+                sample: 0,
+                x: 5,
+                y: 7,
+                orientation,
+                color_perm: 0,
+                normal_perm: 0,
+                shrink: [3, 5],
+                zeroed: false,
+            };
+            let data = gather(&samples, &features, &[crop], false, size);
+            let (cw, ch) = (size - 3, size - 5);
+            let (tw, th) = if orientation & 4 != 0 { (ch, cw) } else { (cw, ch) };
+            let at = |c: usize, x: usize, y: usize| data[c * size * size + y * size + x];
+            for y in 0..size {
+                for x in 0..size {
+                    let inside = x < tw && y < th;
+                    assert_eq!(at(0, x, y) != 0.0, inside, "orientation {orientation}, pixel ({x}, {y})");
+                }
+            }
+            // The tile's corner pixels are the window's corners, as the orientation moves them.
+            let value = |sx: usize, sy: usize| (1 + 10 * (5 + sx) + 1000 * (7 + sy)) as f32;
+            let (mut corners, mut expected) = (Vec::new(), Vec::new());
+            for (x, y) in [(0, 0), (tw - 1, 0), (0, th - 1), (tw - 1, th - 1)] {
+                corners.push(at(0, x, y));
+            }
+            for (x, y) in [(0, 0), (cw - 1, 0), (0, ch - 1), (cw - 1, ch - 1)] {
+                expected.push(value(x, y));
+            }
+            corners.sort_by(f32::total_cmp);
+            expected.sort_by(f32::total_cmp);
+            assert_eq!(corners, expected, "orientation {orientation}");
+        }
+    }
+
+    #[test]
+    fn a_zeroed_crop_keeps_only_its_auxiliary_features() {
+        let samples = vec![sample(32, 32, 9)];
+        let features = InputFeatures::parse("alb,nrm").unwrap();
+        let crop =
+            Crop { sample: 0, x: 0, y: 0, orientation: 0, color_perm: 0, normal_perm: 0, shrink: [0, 0], zeroed: true };
+        let input = gather(&samples, &features, &[crop], false, 16);
+        let target = gather(&samples, &features, &[crop], true, 16);
+        let plane = 16 * 16;
+        assert!(input[..3 * plane].iter().all(|&v| v == 0.0), "color zeroed");
+        assert!(input[3 * plane..].iter().all(|&v| v != 0.0), "features kept");
+        assert!(target.iter().all(|&v| v == 0.0), "target zeroed");
+    }
 }

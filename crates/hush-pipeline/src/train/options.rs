@@ -115,7 +115,7 @@ pub struct TrainOptions {
     #[cfg_attr(feature = "clap", arg(long))]
     pub crop: Option<usize>,
     /// Augmentation: crop (random crops only), flips (and 8 orientations), full (and OIDN's channel
-    /// permutations) [default: flips].
+    /// permutations), oidn (and OIDN's shrunk, zero-padded crops and zeroed samples) [default: flips].
     #[cfg_attr(feature = "clap", arg(long))]
     pub augment: Option<String>,
     /// Seed of the initial weights and of the crops [default: 0].
@@ -373,7 +373,9 @@ pub fn resolve_with_init(
         None => d.optimizer.clone(),
     };
     let augment = match &args.augment {
-        Some(a) => Augment::parse(a).with_context(|| format!("unknown --augment '{a}': use crop, flips or full"))?,
+        Some(a) => {
+            Augment::parse(a).with_context(|| format!("unknown --augment '{a}': use crop, flips, full or oidn"))?
+        }
         None => d.augment,
     };
     let loss = match &args.loss {
