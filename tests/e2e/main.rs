@@ -57,6 +57,29 @@ fn missing_scene_file_is_a_clear_error() {
     assert!(err.contains("/nonexistent/scene.xml"), "{err}");
 }
 
+/// `hush scene check` loads a scene without a GPU: what it holds on success, the error naming the file on
+/// failure.
+#[test]
+fn scene_check_reports_what_a_scene_holds() {
+    let out = hush(&["scene", "check", s(&cbox())]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(said.contains("scene.xml: 8 shapes, 36 triangles") && said.contains("0 warnings"), "{said}");
+    let dir = scratch("scene-check").join("folder.xml");
+    std::fs::create_dir_all(&dir).unwrap();
+    let err = expect_error(&["scene", "check", s(&dir)]);
+    assert!(err.contains("is a directory"), "{err}");
+}
+
+/// An error whose message already shows its cause (a manifest that is not JSON) says it once.
+#[test]
+fn an_error_says_its_cause_once() {
+    let ds = scratch("cause-once");
+    std::fs::write(ds.join("manifest.json"), "[").unwrap();
+    let err = expect_error(&["train", "--dataset", s(&ds), "--out", s(&ds.join("run"))]);
+    assert_eq!(err.matches("EOF while parsing").count(), 1, "{err}");
+}
+
 #[test]
 fn malformed_xml_is_a_clear_error() {
     let dir = scratch("malformed");
