@@ -350,23 +350,13 @@ fn unmount(at: &Path) {
 
 /// Every file below `dir` (relative path) with its size and modification time.
 fn snapshot(dir: &Path) -> std::collections::BTreeMap<String, (u64, std::time::SystemTime)> {
-    let mut out = std::collections::BTreeMap::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        let Ok(entries) = std::fs::read_dir(&d) else { continue };
-        for e in entries.flatten() {
-            let p = e.path();
-            match e.metadata() {
-                Ok(m) if m.is_dir() => stack.push(p),
-                Ok(m) => {
-                    let rel = p.strip_prefix(dir).unwrap_or(&p).display().to_string();
-                    out.insert(rel, (m.len(), m.modified().unwrap_or(std::time::UNIX_EPOCH)));
-                }
-                Err(_) => {}
-            }
-        }
-    }
-    out
+    crate::util::files_below(dir)
+        .into_iter()
+        .filter_map(|p| {
+            let m = std::fs::metadata(&p).ok()?;
+            Some((crate::util::relative(&p, dir), (m.len(), m.modified().unwrap_or(std::time::UNIX_EPOCH))))
+        })
+        .collect()
 }
 
 /// The bytes of the files below `dir`.
@@ -374,10 +364,7 @@ fn du(dir: &Path) -> u64 {
     snapshot(dir).values().map(|(len, _)| len).sum()
 }
 
-/// Temporary files of an interrupted atomic write (`.<name>.<...>.tmp`) below `dir`.
+/// Temporary files of an interrupted atomic write below `dir`.
 fn temporaries(dir: &Path) -> Vec<String> {
-    snapshot(dir)
-        .into_keys()
-        .filter(|f| f.rsplit('/').next().is_some_and(|n| n.starts_with('.') && n.ends_with(".tmp")))
-        .collect()
+    snapshot(dir).into_keys().filter(|f| crate::util::is_temporary(f)).collect()
 }

@@ -115,18 +115,7 @@ fn seeds_of(name: &str, root: &Path) -> Result<PathBuf> {
 
 /// Every file under `dir` (recursively) that `keep` accepts, sorted.
 fn list(dir: &Path, keep: &dyn Fn(&Path) -> bool) -> Vec<PathBuf> {
-    let mut out = Vec::new();
-    let Ok(entries) = std::fs::read_dir(dir) else { return out };
-    for entry in entries.flatten() {
-        let path = entry.path();
-        match entry.file_type() {
-            Ok(t) if t.is_dir() => out.extend(list(&path, keep)),
-            Ok(t) if t.is_file() && keep(&path) => out.push(path),
-            _ => {}
-        }
-    }
-    out.sort();
-    out
+    crate::util::files_below(dir).into_iter().filter(|p| keep(p)).collect()
 }
 
 fn fuzz_one(exe: &Path, name: &str, root: &Path, minutes: f64, max_len: u64) -> Result<Value> {

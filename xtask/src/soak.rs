@@ -212,8 +212,7 @@ fn compare(hush: &Path, whole: &Path, killed: &Path) -> Result<Vec<String>> {
         problems.push(format!("hush dataset check fails:\n{}", String::from_utf8_lossy(&check.stderr)));
     }
     let (a, b) = (files(whole), files(killed));
-    let temps: Vec<&String> =
-        b.keys().filter(|f| f.rsplit('/').next().is_some_and(|n| n.starts_with('.') && n.ends_with(".tmp"))).collect();
+    let temps: Vec<&String> = b.keys().filter(|f| crate::util::is_temporary(f)).collect();
     if !temps.is_empty() {
         problems.push(format!("temporary files left: {temps:?}"));
     }
@@ -277,18 +276,8 @@ fn metrics(bytes: &[u8]) -> Value {
 
 /// Every file below `dir` (relative path) with its bytes.
 fn files(dir: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
-    let mut out = std::collections::BTreeMap::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        let Ok(entries) = std::fs::read_dir(&d) else { continue };
-        for e in entries.flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                stack.push(p);
-            } else if let Ok(bytes) = std::fs::read(&p) {
-                out.insert(p.strip_prefix(dir).unwrap_or(&p).display().to_string(), bytes);
-            }
-        }
-    }
-    out
+    crate::util::files_below(dir)
+        .into_iter()
+        .filter_map(|p| Some((crate::util::relative(&p, dir), std::fs::read(&p).ok()?)))
+        .collect()
 }

@@ -178,6 +178,35 @@ pub fn site_packages(venv: &Path) -> Result<PathBuf> {
         .ok_or_else(|| format!("no lib/python3.*/site-packages in the venv {}", venv.display()))
 }
 
+/// Every regular file below `dir` (recursively; symbolic links are not followed), sorted.
+pub fn files_below(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        let Ok(entries) = std::fs::read_dir(&d) else { continue };
+        for entry in entries.flatten() {
+            match entry.file_type() {
+                Ok(t) if t.is_dir() => stack.push(entry.path()),
+                Ok(t) if t.is_file() => out.push(entry.path()),
+                _ => {}
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+/// `path` relative to `dir`, as text.
+pub fn relative(path: &Path, dir: &Path) -> String {
+    path.strip_prefix(dir).unwrap_or(path).display().to_string()
+}
+
+/// Whether `path` names a temporary file of an interrupted atomic write (`.<name>.<...>.tmp`, hush's and
+/// xtask's alike).
+pub fn is_temporary(path: &str) -> bool {
+    path.rsplit('/').next().is_some_and(|n| n.starts_with('.') && n.ends_with(".tmp"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
