@@ -29,8 +29,8 @@ pub struct Layout {
 }
 
 /// Which auxiliary images go with a noisy render: its own (`Noisy`, at its spp: what a user denoising a render
-/// has, OIDN's default) or the view's clean ones (`Clean`: rendered once per view at `--aux-spp`, first hit
-/// only; OIDN's `clean_aux`).
+/// has, OIDN's default) or the view's clean ones (`Clean`: rendered once per view at `--aux-spp`; OIDN's
+/// `clean_aux`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum AuxSource {
@@ -56,7 +56,7 @@ impl AuxSource {
     pub fn describe(self) -> &'static str {
         match self {
             AuxSource::Noisy => "each noisy render's own auxiliary images, at its spp",
-            AuxSource::Clean => "the view's clean auxiliary images (first hit, --aux-spp samples)",
+            AuxSource::Clean => "the view's clean auxiliary images (--aux-spp samples)",
         }
     }
 }

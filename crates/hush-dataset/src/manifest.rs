@@ -74,12 +74,17 @@ impl AuxFiles {
     }
 }
 
-/// The clean auxiliary images of a view, rendered together (first hit only: `max_depth` 1).
+/// The clean auxiliary images of a view, rendered together.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct AuxRecord {
     pub spp: u32,
     pub seed: u64,
     pub render_seconds: f64,
+    /// The path depth they were rendered at: the scene's, so that they follow mirrors and glass to the
+    /// surface seen through them, as each noisy render's own features do. Absent in datasets whose clean
+    /// features were rendered at depth 1 (where mirrors and glass had none); a resume renders those again.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_depth: Option<u32>,
     #[serde(flatten)]
     pub files: AuxFiles,
 }

@@ -3,7 +3,8 @@
 // Light transport follows Mitsuba 3's `path` integrator: next-event estimation combined with
 // BSDF sampling by multiple importance sampling (power heuristic), Russian roulette from
 // depth RR_DEPTH, and Mitsuba's `max_depth` convention (1 = emitters seen directly,
-// 2 = direct light only). Auxiliary features are taken at the first hit.
+// 2 = direct light only). Auxiliary features are taken at the first hit that is not a delta surface
+// (mirrors and smooth glass are followed, as OIDN recommends).
 
 struct Params {
     origin: vec4<f32>,

@@ -76,13 +76,14 @@ pub struct RenderOutput {
     pub color: Image,
     /// Per channel, the estimated variance of each pixel's mean (sample variance / spp).
     pub color_variance: Image,
-    /// Reflectance at the first hit (for diffuse surfaces, the diffuse reflectance).
+    /// Reflectance at the first hit that is not a delta (mirror or smooth glass) surface: the features follow
+    /// those, as OIDN recommends (for diffuse surfaces, the diffuse reflectance).
     pub albedo: Image,
-    /// Diffuse reflectance k_d at the first hit.
+    /// Diffuse reflectance k_d at that hit.
     pub diffuse: Image,
-    /// Specular reflectance k_s at the first hit (0 for purely diffuse surfaces).
+    /// Specular reflectance k_s at that hit (0 for purely diffuse surfaces).
     pub specular: Image,
-    /// World-space shading normal at the first hit, averaged and renormalized; 0 where every
+    /// World-space shading normal at that hit, averaged and renormalized; 0 where every
     /// sample escaped.
     pub normal: Image,
     /// Samples per pixel actually rendered: `settings.spp`, or fewer when a time limit ended

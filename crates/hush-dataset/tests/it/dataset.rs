@@ -41,6 +41,7 @@ pub fn record(scene: &str, view: &str, spps: &[u32], size: u32) -> ViewRecord {
             spp: 64,
             seed: 1,
             render_seconds: 0.25,
+            max_depth: Some(8),
             files: AuxFiles::from_fn(|kind| Layout::aux_name(scene, view, kind)),
         },
     }

@@ -53,7 +53,7 @@ pub struct DatasetPlan {
     pub firefly_factor: f32,
     /// Measure each reference's relMSE against an independent render at this spp (0: no check).
     pub ref_check_spp: u32,
-    /// Samples per pixel of the clean auxiliary features (first hit only).
+    /// Samples per pixel of the clean auxiliary features.
     pub aux_spp: u32,
     /// Square image size in pixels (`None`: the scene files' sizes).
     pub size: Option<u32>,

@@ -237,22 +237,27 @@ pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u3
     let kept = previous.as_ref().and_then(|p| p.aux.clone()).filter(|a| {
         a.spp == plan.aux_spp
             && a.seed == aux_seed
+            && a.max_depth == Some(scene.max_depth)
             && a.files == clean
             && AuxKind::ALL.iter().all(|&k| ctx.valid(clean.file(k), &camera))
     });
     let aux = match kept {
         Some(a) => a,
         None => {
-            // Features come from the first hit only, so a depth-1 render gives them at a
-            // fraction of a full path's cost.
-            let mut first_hit = scene.clone();
-            first_hit.max_depth = 1;
-            let out = ctx.render(&first_hit, plan.aux_spp, aux_seed, &format!("{label} features"))?;
+            // At the scene's depth: the features follow mirrors and glass to the surface seen through them
+            // (at depth 1 those would have none, unlike the noisy renders' own features).
+            let out = ctx.render(&scene, plan.aux_spp, aux_seed, &format!("{label} features"))?;
             for kind in AuxKind::ALL {
                 write_rgb(ctx.layout.path(clean.file(kind)), aux_image(&out, kind))?;
             }
             ctx.rendered += 1;
-            AuxRecord { spp: plan.aux_spp, seed: aux_seed, render_seconds: out.seconds, files: clean }
+            AuxRecord {
+                spp: plan.aux_spp,
+                seed: aux_seed,
+                render_seconds: out.seconds,
+                max_depth: Some(scene.max_depth),
+                files: clean,
+            }
         }
     };
     progress.aux = Some(aux);
