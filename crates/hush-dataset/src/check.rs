@@ -144,8 +144,12 @@ fn check_view_files(layout: &Layout, view: &ViewRecord, checked: &mut usize, pro
 
 /// Ok if `path` reads as a 3-channel `w`×`h` EXR without NaN/Inf; else the problem, naming the file.
 pub fn check_image(path: &Path, w: usize, h: usize) -> Result<(), String> {
-    if !path.is_file() {
-        return Err(format!("{}: missing; re-run `hush dataset` to render it", path.display()));
+    match hush_io::describe_unreadable(path) {
+        None => {}
+        Some(why) if why == "no such file" => {
+            return Err(format!("{}: missing; re-run `hush dataset` to render it", path.display()));
+        }
+        Some(why) => return Err(format!("{}: {why}; remove it and re-run `hush dataset`", path.display())),
     }
     let image = read_rgb(path).map_err(|e| format!("{e}; delete it and re-run `hush dataset`"))?;
     if (image.width, image.height, image.channels) != (w, h, 3) {

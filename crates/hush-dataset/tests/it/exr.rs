@@ -103,7 +103,22 @@ fn reads_the_oidn_normal_input_as_plain_rgb() {
 #[test]
 fn missing_file_names_the_path() {
     let err = read_exr("/nonexistent/dir/x.exr").unwrap_err().to_string();
-    assert!(err.contains("/nonexistent/dir/x.exr"), "{err}");
+    assert!(err.contains("/nonexistent/dir/x.exr") && err.contains("no such file"), "{err}");
+}
+
+/// "no such file" only of a path that does not exist: a folder or a device is named as what it is.
+#[test]
+fn a_folder_or_device_is_not_called_missing() {
+    let dir = std::env::temp_dir().join(format!("hush-exr-folder-{}", std::process::id()));
+    let folder = dir.join("image.exr");
+    std::fs::create_dir_all(&folder).unwrap();
+    let err = read_exr(&folder).unwrap_err().to_string();
+    assert!(err.contains("is a directory") && !err.contains("no such file"), "{err}");
+    let err = read_exr("/dev/zero").unwrap_err().to_string();
+    assert!(err.contains("not a regular file") && !err.contains("no such file"), "{err}");
+    let check = hush_dataset::check_image(&folder, 2, 2).unwrap_err();
+    assert!(check.contains("is a directory") && !check.contains("missing"), "{check}");
+    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// An EXR file whose header claims a huge image (its data window patched to 65535×65535 in a 2×2 file of a
