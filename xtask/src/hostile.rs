@@ -276,7 +276,7 @@ fn make_cases(hush: &Path, dir: &Path) -> Result<Vec<Case>> {
     let f = |name: &str| dir.join(name);
     // A scene file is read by `hush scene check` exactly as `hush render` reads it, without opening the GPU,
     // so the peak memory is the refusal's own.
-    let render = |scene: &Path| -> Vec<String> { ["scene", "check", &s(scene)].map(String::from).to_vec() };
+    let load = |scene: &Path| -> Vec<String> { ["scene", "check", &s(scene)].map(String::from).to_vec() };
     let case = |name, what, args: Vec<String>, expect: &[&str]| Case {
         name,
         what,
@@ -306,21 +306,21 @@ fn make_cases(hush: &Path, dir: &Path) -> Result<Vec<Case>> {
     cases.push(case(
         "scene-3gb",
         "a scene file of 3 GB (a hole)",
-        render(&f("huge.xml")),
+        load(&f("huge.xml")),
         &["huge.xml", "larger than the limit"],
     ));
     symlink(Path::new("/dev/zero"), &f("zero.xml"))?;
     cases.push(case(
         "scene-dev-zero",
         "a scene file that never ends (/dev/zero)",
-        render(&f("zero.xml")),
+        load(&f("zero.xml")),
         &["zero.xml", "not a regular file"],
     ));
     std::fs::create_dir_all(f("folder.xml")).map_err(|e| e.to_string())?;
     cases.push(case(
         "scene-directory",
         "a scene path that is a folder",
-        render(&f("folder.xml")),
+        load(&f("folder.xml")),
         &["folder.xml", "is a directory"],
     ));
     symlink(&f("loop-b.xml"), &f("loop-a.xml"))?;
@@ -328,18 +328,18 @@ fn make_cases(hush: &Path, dir: &Path) -> Result<Vec<Case>> {
     cases.push(case(
         "scene-symlink-loop",
         "a scene path that is a symbolic link loop",
-        render(&f("loop-a.xml")),
+        load(&f("loop-a.xml")),
         &["loop-a.xml", "symbolic link loop"],
     ));
     let nested = "<bsdf type=\"twosided\">".repeat(100_000) + &"</bsdf>".repeat(100_000);
     write(&f("nested.xml"), mitsuba(&format!("<shape type=\"sphere\">{nested}</shape>")))?;
-    cases.push(case("mitsuba-nesting", "<bsdf> nested 100,000 deep", render(&f("nested.xml")), &["nested.xml"]));
+    cases.push(case("mitsuba-nesting", "<bsdf> nested 100,000 deep", load(&f("nested.xml")), &["nested.xml"]));
     let deep = "<a>".repeat(1_000_000) + &"</a>".repeat(1_000_000);
     write(&f("deep.xml"), mitsuba(&deep))?;
     cases.push(case(
         "xml-depth",
         "XML elements nested a million deep",
-        render(&f("deep.xml")),
+        load(&f("deep.xml")),
         &["deep.xml", "HUSH_MAX_XML_NODES"],
     ));
     let mut defaults = String::from("<default name=\"v0\" value=\"0123456789\"/>\n");
@@ -353,7 +353,7 @@ fn make_cases(hush: &Path, dir: &Path) -> Result<Vec<Case>> {
     cases.push(case(
         "mitsuba-expansion",
         "$variables that double 39 times (5 TB)",
-        render(&f("expand.xml")),
+        load(&f("expand.xml")),
         &["expand.xml"],
     ));
     write(
@@ -363,7 +363,7 @@ fn make_cases(hush: &Path, dir: &Path) -> Result<Vec<Case>> {
     cases.push(case(
         "mesh-outside-folder",
         "a mesh path that leaves the scene's folder",
-        render(&f("outside.xml")),
+        load(&f("outside.xml")),
         &["outside.xml", "outside the scene's folder"],
     ));
     std::fs::create_dir_all(f("meshdir.obj")).map_err(|e| e.to_string())?;
@@ -371,7 +371,7 @@ fn make_cases(hush: &Path, dir: &Path) -> Result<Vec<Case>> {
     cases.push(case(
         "mesh-directory",
         "a mesh path that is a folder",
-        render(&f("mesh-dir.xml")),
+        load(&f("mesh-dir.xml")),
         &["meshdir.obj", "is a directory"],
     ));
     write(&f("bigtex.png"), png_header(65535, 65535))?;
@@ -386,7 +386,7 @@ fn make_cases(hush: &Path, dir: &Path) -> Result<Vec<Case>> {
         ..case(
             "texture-65535",
             "a PNG texture declaring 65535² pixels",
-            render(&f("bigtex.xml")),
+            load(&f("bigtex.xml")),
             &["bigtex.png", "above the limit"],
         )
     });
@@ -403,7 +403,7 @@ fn make_cases(hush: &Path, dir: &Path) -> Result<Vec<Case>> {
         ..case(
             "texture-symlink-loop",
             "a texture that is a symbolic link loop",
-            render(&f("texloop.xml")),
+            load(&f("texloop.xml")),
             &["texloop-a.png", "symbolic link loop"],
         )
     });
@@ -416,7 +416,7 @@ fn make_cases(hush: &Path, dir: &Path) -> Result<Vec<Case>> {
         ..case(
             "obj-mtl-dev-zero",
             "an OBJ whose material library is /dev/zero",
-            render(&f("zero-mtl.obj")),
+            load(&f("zero-mtl.obj")),
             &["zero.mtl", "not a regular file"],
         )
     });
@@ -424,7 +424,7 @@ fn make_cases(hush: &Path, dir: &Path) -> Result<Vec<Case>> {
     cases.push(case(
         "obj-index",
         "an OBJ face with the index 4,000,000,000",
-        render(&f("bad-index.obj")),
+        load(&f("bad-index.obj")),
         &["bad-index.obj"],
     ));
 
@@ -447,7 +447,7 @@ fn make_cases(hush: &Path, dir: &Path) -> Result<Vec<Case>> {
     cases.push(case(
         "gltf-2g-zeros",
         "a glTF accessor of 2^31 elements and no data",
-        render(&f("zeros.gltf")),
+        load(&f("zeros.gltf")),
         &["zeros.gltf", "without a buffer view"],
     ));
     let view_accessor = r#"{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,1]}"#;
@@ -459,7 +459,7 @@ fn make_cases(hush: &Path, dir: &Path) -> Result<Vec<Case>> {
     cases.push(case(
         "gltf-uri-dev-zero",
         "a glTF buffer at /dev/zero",
-        render(&f("dev-zero.gltf")),
+        load(&f("dev-zero.gltf")),
         &["dev-zero.gltf", "not a relative path"],
     ));
     write(
@@ -471,7 +471,7 @@ fn make_cases(hush: &Path, dir: &Path) -> Result<Vec<Case>> {
     cases.push(case(
         "gltf-node-cycle",
         "glTF nodes that are each other's child",
-        render(&f("cycle.gltf")),
+        load(&f("cycle.gltf")),
         &["cycle.gltf"],
     ));
 

@@ -146,7 +146,7 @@ fn check_view_files(layout: &Layout, view: &ViewRecord, checked: &mut usize, pro
 pub fn check_image(path: &Path, w: usize, h: usize) -> Result<(), String> {
     match hush_io::describe_unreadable(path) {
         None => {}
-        Some(why) if why == "no such file" => {
+        Some(hush_io::Unreadable::Missing) => {
             return Err(format!("{}: missing; re-run `hush dataset` to render it", path.display()));
         }
         Some(why) => return Err(format!("{}: {why}; remove it and re-run `hush dataset`", path.display())),

@@ -191,11 +191,10 @@ pub fn check_exr_header(path: &Path) -> Result<u64> {
 pub fn read_exr(path: impl AsRef<Path>) -> Result<ExrImage> {
     let path = path.as_ref();
     if let Some(why) = hush_io::describe_unreadable(path) {
-        let kind = if why == "no such file" { std::io::ErrorKind::NotFound } else { std::io::ErrorKind::InvalidInput };
         return Err(Error::file(
             path,
             "read EXR",
-            std::io::Error::new(kind, format!("{why}; check the path or re-create the dataset")),
+            std::io::Error::new(why.kind(), format!("{why}; check the path or re-create the dataset")),
         ));
     }
     check_exr_header(path)?;

@@ -40,21 +40,60 @@ impl Limit {
     }
 }
 
-/// Why `path` cannot be read as a file, in words: `None` when it is a regular file (symbolic links
-/// followed).
-pub fn describe_unreadable(path: &Path) -> Option<String> {
+/// Why a path cannot be read as a file. Its text ("no such file", "is a directory, not a file", ...) follows
+/// the path in a message.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Unreadable {
+    /// Nothing is there: the only case called "no such file".
+    Missing,
+    Directory,
+    /// A device, a pipe or a socket.
+    NotRegular,
+    DanglingLink,
+    LinkLoop,
+    PermissionDenied,
+    /// Any other error of the file system, in its words.
+    Other(String),
+}
+
+impl Unreadable {
+    /// The I/O error kind of an error made from this: `NotFound` for a missing file only.
+    pub fn kind(&self) -> ErrorKind {
+        match self {
+            Unreadable::Missing => ErrorKind::NotFound,
+            _ => ErrorKind::InvalidInput,
+        }
+    }
+}
+
+impl std::fmt::Display for Unreadable {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Unreadable::Missing => "no such file",
+            Unreadable::Directory => "is a directory, not a file",
+            Unreadable::NotRegular => "is not a regular file (a device, pipe or socket): give hush a file",
+            Unreadable::DanglingLink => "is a symbolic link to nothing (a dangling link)",
+            Unreadable::LinkLoop => "is a symbolic link loop",
+            Unreadable::PermissionDenied => "cannot be read: permission denied",
+            Unreadable::Other(e) => e,
+        })
+    }
+}
+
+/// Why `path` cannot be read as a file: `None` when it is a regular file (symbolic links followed).
+pub fn describe_unreadable(path: &Path) -> Option<Unreadable> {
     match std::fs::metadata(path) {
-        Ok(m) if m.is_dir() => Some("is a directory, not a file".into()),
-        Ok(m) if !m.is_file() => Some("is not a regular file (a device, pipe or socket): give hush a file".into()),
+        Ok(m) if m.is_dir() => Some(Unreadable::Directory),
+        Ok(m) if !m.is_file() => Some(Unreadable::NotRegular),
         Ok(_) => None,
         Err(e) => Some(match e.kind() {
             ErrorKind::NotFound => match std::fs::symlink_metadata(path) {
-                Ok(_) => "is a symbolic link to nothing (a dangling link)".into(),
-                Err(_) => "no such file".into(),
+                Ok(_) => Unreadable::DanglingLink,
+                Err(_) => Unreadable::Missing,
             },
-            _ if e.raw_os_error() == Some(40) => "is a symbolic link loop".into(),
-            ErrorKind::PermissionDenied => "cannot be read: permission denied".into(),
-            _ => e.to_string(),
+            _ if e.raw_os_error() == Some(40) => Unreadable::LinkLoop,
+            ErrorKind::PermissionDenied => Unreadable::PermissionDenied,
+            _ => Unreadable::Other(e.to_string()),
         }),
     }
 }
@@ -73,8 +112,7 @@ pub fn read_limited_bare(path: &Path, limit: Limit) -> Result<Vec<u8>, String> {
 
 fn read_bounded(path: &Path, limit: Limit) -> Result<Vec<u8>, (ErrorKind, String)> {
     if let Some(why) = describe_unreadable(path) {
-        let kind = if why == "no such file" { ErrorKind::NotFound } else { ErrorKind::InvalidInput };
-        return Err((kind, why));
+        return Err((why.kind(), why.to_string()));
     }
     let file = std::fs::File::open(path).map_err(|e| (e.kind(), e.to_string()))?;
     let declared = file.metadata().map(|m| m.len()).unwrap_or(0);
@@ -197,16 +235,19 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("hush-io-test-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let missing = dir.join("missing.xml");
-        assert_eq!(describe_unreadable(&missing).as_deref(), Some("no such file"));
+        assert_eq!(describe_unreadable(&missing), Some(Unreadable::Missing));
+        assert_eq!(Unreadable::Missing.to_string(), "no such file");
         let link = dir.join("dangling.xml");
         let _ = std::fs::remove_file(&link);
         std::os::unix::fs::symlink(&missing, &link).unwrap();
-        assert!(describe_unreadable(&link).unwrap().contains("dangling"));
+        assert_eq!(describe_unreadable(&link), Some(Unreadable::DanglingLink));
+        assert!(Unreadable::DanglingLink.to_string().contains("dangling"));
         let (a, b) = (dir.join("loop-a"), dir.join("loop-b"));
         let _ = (std::fs::remove_file(&a), std::fs::remove_file(&b));
         std::os::unix::fs::symlink(&b, &a).unwrap();
         std::os::unix::fs::symlink(&a, &b).unwrap();
-        assert!(describe_unreadable(&a).unwrap().contains("loop"), "{:?}", describe_unreadable(&a));
+        assert_eq!(describe_unreadable(&a), Some(Unreadable::LinkLoop));
+        assert!(Unreadable::LinkLoop.to_string().contains("loop"));
         assert!(
             read_limited(&dir, Limit { bytes: 10, var: "X" }, "scene file")
                 .unwrap_err()

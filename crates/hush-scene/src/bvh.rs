@@ -119,7 +119,7 @@ impl Builder<'_> {
     }
 
     /// Fills node `index` (at `depth`, the root's is 1) with triangles `order[start..end]`, recursing into
-    /// children. Below [`MAX_SAH_DEPTH`] every split halves the range, so no input (say, centroids spaced
+    /// children. From [`MAX_SAH_DEPTH`] on, every split halves the range, so no input (say, centroids spaced
     /// ever more widely, which the SAH peels one at a time) makes the tree deeper than that plus log2 of the
     /// triangle count.
     fn build(&mut self, index: usize, start: usize, end: usize, depth: usize) {

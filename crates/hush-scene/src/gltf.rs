@@ -37,7 +37,7 @@ struct Loader<'a> {
     buffers: Vec<Vec<u8>>,
     /// Each image, decoded when a material first uses it (`None`: not yet).
     images: Vec<Option<crate::texture::Pixels>>,
-    document: gltf::Document,
+    document: &'a gltf::Document,
     textures: Vec<Texture>,
     texture_ids: HashMap<(usize, [u32; 3]), TextureId>,
     warnings: Vec<String>,
@@ -195,7 +195,7 @@ pub(crate) fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
         path,
         buffers,
         images,
-        document: doc.clone(),
+        document: &doc,
         textures: Vec::new(),
         texture_ids: HashMap::new(),
         warnings: Vec::new(),

@@ -35,8 +35,7 @@ mod shapes;
 mod texture;
 
 /// The largest scene, mesh, buffer or image file hush reads: 2 GiB, or the environment variable
-/// `HUSH_MAX_SCENE_BYTES` (bytes). A larger file, or one that never ends, is refused after reading at most
-/// that much.
+/// `HUSH_MAX_SCENE_BYTES` (bytes). A larger file is refused before it is read (see [`hush_io::read_limited`]).
 pub fn max_file_bytes() -> hush_io::Limit {
     hush_io::Limit::from_env("HUSH_MAX_SCENE_BYTES", 2 << 30)
 }

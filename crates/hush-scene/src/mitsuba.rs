@@ -1116,7 +1116,7 @@ impl Parser<'_, '_> {
                     filename.ok_or_else(|| self.err(node, "an obj shape needs <string name=\"filename\">"))?;
                 let file = self.referenced(node, &filename)?;
                 match hush_io::describe_unreadable(&file) {
-                    Some(why) if why == "no such file" => {
+                    Some(hush_io::Unreadable::Missing) => {
                         self.warn(
                             node,
                             format!("shape '{name}': mesh file {} not found: the shape is skipped", file.display()),

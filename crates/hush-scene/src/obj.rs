@@ -45,7 +45,7 @@ pub(crate) fn read_obj(path: &Path, mtl: bool) -> Result<ObjFile, SceneError> {
                 "{}: material library '{}' {} ({used})",
                 path.display(),
                 lib.display(),
-                if why == "no such file" { "is missing".to_string() } else { why }
+                if why == hush_io::Unreadable::Missing { "is missing".to_string() } else { why.to_string() }
             ));
             return Ok((Vec::new(), Default::default()));
         }
