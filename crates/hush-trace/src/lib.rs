@@ -22,6 +22,7 @@ mod render;
 mod rough;
 mod scan;
 mod upload;
+mod wide;
 
 pub use gpu::{GpuContext, INSTALL_HINT};
 pub use render::{KERNEL_SOURCE, MAX_CACHED_KERNELS, RenderOutput, RenderSettings, Renderer, kernel_source};

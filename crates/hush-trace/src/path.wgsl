@@ -66,7 +66,7 @@ struct Light {
 // Per pixel, ACCUM_STRIDE floats: beauty sum (3), beauty squared sum (3), albedo (3),
 // diffuse (3), specular (3), normal (3), count of non-finite samples discarded (1).
 @group(0) @binding(5) var<storage, read_write> accum: array<f32>;
-@group(0) @binding(6) var<storage, read> nodes: array<Node>;
+@group(0) @binding(6) var<storage, read> nodes: array<WideNode>;
 
 const PI: f32 = 3.14159265358979;
 const INV_PI: f32 = 0.318309886183791;
@@ -115,25 +115,65 @@ struct Hit {
     shape: u32,
 }
 
-// A BVH node (hush_scene::BvhNode): a leaf when count > 0 (triangles first .. first + count),
-// otherwise an interior node with children first and first + 1.
-struct Node {
-    min: vec3<f32>,
-    first: u32,
-    max: vec3<f32>,
-    count: u32,
+// A node of the four-wide BVH (hush_trace's `GpuWideNode`, whose documentation has the layout):
+// the node's lower corner and quantization steps, its children's boxes as bytes, and where their
+// nodes and triangles start.
+struct WideNode {
+    a: vec4<u32>,
+    b: vec4<u32>,
+    c: vec4<u32>,
 }
 
 const NO_HIT: u32 = 0xffffffffu;
-const STACK_SIZE: u32 = 64u;
+const STACK_SIZE: u32 = 96u;
 
-// Entry distance of the ray into a node's box, or T_MAX when it misses within t_max.
-fn enter(n: Node, o: vec3<f32>, inv_d: vec3<f32>, t_max: f32) -> f32 {
-    let t0 = (n.min - o) * inv_d;
-    let t1 = (n.max - o) * inv_d;
+// Entry distance of the ray into the box [lo, hi], or T_MAX when it misses within t_max.
+fn enter(lo: vec3<f32>, hi: vec3<f32>, o: vec3<f32>, inv_d: vec3<f32>, t_max: f32) -> f32 {
+    let t0 = (lo - o) * inv_d;
+    let t1 = (hi - o) * inv_d;
     let near = max(max(min(t0.x, t1.x), min(t0.y, t1.y)), max(min(t0.z, t1.z), 0.0));
     let far = min(min(max(t0.x, t1.x), max(t0.y, t1.y)), min(max(t0.z, t1.z), t_max));
     return select(T_MAX, near, near <= far);
+}
+
+// Byte c of each of the three words, as a vector.
+fn bytes_at(x: u32, y: u32, z: u32, c: u32) -> vec3<f32> {
+    return vec3<f32>(vec3<u32>(x >> (8u * c), y >> (8u * c), z >> (8u * c)) & vec3<u32>(0xffu));
+}
+
+// Child c of a wide node: its entry distance (T_MAX for a miss or an empty slot) and its stack
+// entry (index << 3 | kind: 1-4 a leaf of that many triangles, 7 an interior node). `next` holds the
+// next interior child's node and the next leaf's first triangle, and advances past this child.
+struct Child {
+    t: f32,
+    entry: u32,
+}
+
+const KIND_INTERIOR: u32 = 7u;
+const INDEX_MASK: u32 = 0x3ffffffu;
+
+fn wide_child(n: WideNode, corner: vec3<f32>, step: vec3<f32>, c: u32, kind: u32, next: ptr<function, vec2<u32>>, o: vec3<f32>, inv_d: vec3<f32>, t_max: f32) -> Child {
+    let lo = corner + bytes_at(n.b.x, n.b.y, n.b.z, c) * step;
+    let hi = corner + bytes_at(n.b.w, n.c.x, n.c.y, c) * step;
+    var t = enter(lo, hi, o, inv_d, t_max);
+    var entry = 0u;
+    if kind == KIND_INTERIOR {
+        entry = ((*next).x << 3u) | KIND_INTERIOR;
+        (*next).x += 1u;
+    } else {
+        entry = ((*next).y << 3u) | kind;
+        (*next).y += kind;
+    }
+    return Child(select(t, T_MAX, kind == 0u), entry);
+}
+
+// Orders two children by distance.
+fn order(a: ptr<function, Child>, b: ptr<function, Child>) {
+    if (*b).t < (*a).t {
+        let t = *a;
+        *a = *b;
+        *b = t;
+    }
 }
 
 // The reciprocal of a ray direction for the BVH's slab tests: tiny components are replaced by ±1e-30 so that
@@ -166,19 +206,29 @@ fn test_triangle_at(i: u32, p0: vec3<f32>, e1: vec3<f32>, e2: vec3<f32>, o: vec3
     return nearer;
 }
 
-// Slot i of the buffer: a triangle, or the analytic shape its e2.w names (shapes.wgsl).
+// Slot i of the buffer: a triangle, or the analytic shape its e2.w names (shapes.wgsl). A triangle
+// loads only its corner and edges here (nine words per SIMD lane, which CPU drivers load one lane at
+// a time): its material, normal and density are loaded once for the nearest hit, `finish_hit`.
 fn test_triangle(i: u32, o: vec3<f32>, d: vec3<f32>, hit: ptr<function, Hit>) {
-    let tri = tris[i];
-    let tag = bitcast<u32>(tri.e2.w);
-    if HAS_SHAPES && tag != 0u {
-        test_shape(i, tag - 1u, bitcast<u32>(tri.p0.w), tri.e1.w, o, d, hit);
-        return;
+    if HAS_SHAPES {
+        let tag = bitcast<u32>(tris[i].e2.w);
+        if tag != 0u {
+            test_shape(i, tag - 1u, bitcast<u32>(tris[i].p0.w), tris[i].e1.w, o, d, hit);
+            return;
+        }
     }
-    if test_triangle_at(i, tri.p0.xyz, tri.e1.xyz, tri.e2.xyz, o, d, hit) {
+    if test_triangle_at(i, tris[i].p0.xyz, tris[i].e1.xyz, tris[i].e2.xyz, o, d, hit) {
+        (*hit).shape = NO_SHAPE;
+    }
+}
+
+// The material, geometric normal and density of a triangle `test_triangle` found nearest.
+fn finish_hit(hit: ptr<function, Hit>) {
+    if (*hit).tri != NO_HIT && (*hit).shape == NO_SHAPE {
+        let tri = tris[(*hit).tri];
         (*hit).mat = bitcast<u32>(tri.p0.w);
         (*hit).ng = cross(tri.e1.xyz, tri.e2.xyz);
         (*hit).area_pdf = tri.e1.w;
-        (*hit).shape = NO_SHAPE;
     }
 }
 
@@ -194,54 +244,72 @@ fn trace_ray(o: vec3<f32>, d: vec3<f32>, t_max: f32, any: bool) -> Hit {
         return hit;
     }
     let inv_d = inverse_direction(d);
+    // Entries still to visit and the distances at which the ray enters them: one popped behind the
+    // nearest hit so far is skipped.
     var stack: array<u32, STACK_SIZE>;
+    var stack_t: array<f32, STACK_SIZE>;
     var sp = 0u;
-    var node = 0u;
-    if enter(nodes[0], o, inv_d, t_max) >= T_MAX {
-        return hit;
-    }
+    var entry = KIND_INTERIOR;
     loop {
-        let n = nodes[node];
-        if n.count > 0u {
-            for (var k = n.first; k < n.first + n.count; k++) {
+        let kind = entry & 7u;
+        if kind != KIND_INTERIOR {
+            let first = entry >> 3u;
+            for (var k = first; k < first + kind; k++) {
                 test_triangle(k, o, d, &hit);
             }
             if any && hit.tri != NO_HIT {
                 return hit;
             }
-            if sp == 0u {
+        } else {
+            let n = nodes[entry >> 3u];
+            let corner = bitcast<vec3<f32>>(n.a.xyz);
+            let step = bitcast<vec3<f32>>((vec3<u32>(n.a.w, n.a.w >> 8u, n.a.w >> 16u) & vec3<u32>(0xffu)) << vec3<u32>(23u));
+            var next = vec2<u32>(n.c.z & INDEX_MASK, n.c.w & INDEX_MASK);
+            var c0 = wide_child(n, corner, step, 0u, (n.c.z >> 26u) & 7u, &next, o, inv_d, hit.t);
+            var c1 = wide_child(n, corner, step, 1u, n.c.z >> 29u, &next, o, inv_d, hit.t);
+            var c2 = wide_child(n, corner, step, 2u, (n.c.w >> 26u) & 7u, &next, o, inv_d, hit.t);
+            var c3 = wide_child(n, corner, step, 3u, n.c.w >> 29u, &next, o, inv_d, hit.t);
+            order(&c0, &c1);
+            order(&c2, &c3);
+            order(&c0, &c2);
+            order(&c1, &c3);
+            order(&c1, &c2);
+            if c0.t < T_MAX {
+                if c3.t < T_MAX {
+                    stack[sp] = c3.entry;
+                    stack_t[sp] = c3.t;
+                    sp += 1u;
+                }
+                if c2.t < T_MAX {
+                    stack[sp] = c2.entry;
+                    stack_t[sp] = c2.t;
+                    sp += 1u;
+                }
+                if c1.t < T_MAX {
+                    stack[sp] = c1.entry;
+                    stack_t[sp] = c1.t;
+                    sp += 1u;
+                }
+                entry = c0.entry;
+                continue;
+            }
+        }
+        // Pop the nearest entry the ray still enters before its nearest hit.
+        var found = false;
+        while sp > 0u {
+            sp -= 1u;
+            if stack_t[sp] < hit.t {
+                entry = stack[sp];
+                found = true;
                 break;
             }
-            sp -= 1u;
-            node = stack[sp];
-            continue;
         }
-        let a = n.first;
-        let b = n.first + 1u;
-        var ta = enter(nodes[a], o, inv_d, hit.t);
-        var tb = enter(nodes[b], o, inv_d, hit.t);
-        var near = a;
-        var far = b;
-        if tb < ta {
-            near = b;
-            far = a;
-            let t = ta;
-            ta = tb;
-            tb = t;
+        if !found {
+            break;
         }
-        if ta >= T_MAX {
-            if sp == 0u {
-                break;
-            }
-            sp -= 1u;
-            node = stack[sp];
-            continue;
-        }
-        node = near;
-        if tb < T_MAX && sp < STACK_SIZE {
-            stack[sp] = far;
-            sp += 1u;
-        }
+    }
+    if !any {
+        finish_hit(&hit);
     }
     return hit;
 }

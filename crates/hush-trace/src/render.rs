@@ -8,7 +8,8 @@ use hush_scene::{PixelFilter, Scene};
 use wgpu::util::DeviceExt;
 
 use crate::scan::{SceneLiterals, scene_source};
-use crate::upload::{GpuLight, GpuMaterial, GpuNode, GpuNormals, GpuShape, GpuTri, KernelFeatures, flatten};
+use crate::upload::{GpuLight, GpuMaterial, GpuNormals, GpuShape, GpuTri, KernelFeatures, flatten};
+use crate::wide::GpuWideNode;
 use crate::{GpuContext, TraceError};
 
 /// The WGSL source of the generic path-tracing kernel (validated by a test with naga).
@@ -321,7 +322,7 @@ impl<'a> Renderer<'a> {
         let normals = storage("normals", bytemuck::cast_slice::<GpuNormals, u8>(&flat.normals));
         let materials = storage("materials", bytemuck::cast_slice::<GpuMaterial, u8>(&flat.materials));
         let lights = storage("lights", bytemuck::cast_slice::<GpuLight, u8>(&flat.lights));
-        let nodes = storage("bvh", bytemuck::cast_slice::<GpuNode, u8>(&flat.nodes));
+        let nodes = storage("bvh", bytemuck::cast_slice::<GpuWideNode, u8>(&flat.nodes));
         let shapes = storage("shapes", bytemuck::cast_slice::<GpuShape, u8>(&flat.shapes));
         let aux_bytes = flat.aux.len() as u64 * 4;
         if aux_bytes > limit {

@@ -6,4 +6,5 @@ fn scan_triangles(o: vec3<f32>, d: vec3<f32>, hit: ptr<function, Hit>) {
     for (var k = 0u; k < params.tri_count; k++) {
         test_triangle(k, o, d, hit);
     }
+    finish_hit(hit);
 }

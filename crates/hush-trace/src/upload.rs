@@ -4,10 +4,11 @@ use std::collections::HashMap;
 
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat3, Vec2, Vec3};
-use hush_scene::{Bvh, BvhNode, Environment, Material, Microfacet, Reflectance, Scene, Texture, TextureId};
+use hush_scene::{Bvh, Environment, Material, Microfacet, Reflectance, Scene, Texture, TextureId};
 
 use crate::TraceError;
 use crate::rough::plastic_tables;
+use crate::wide::{GpuWideNode, WideBvh};
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -248,21 +249,6 @@ pub(crate) struct GpuLight {
     pub pad: [u32; 2],
 }
 
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-pub(crate) struct GpuNode {
-    pub min: [f32; 3],
-    pub first: u32,
-    pub max: [f32; 3],
-    pub count: u32,
-}
-
-impl From<BvhNode> for GpuNode {
-    fn from(n: BvhNode) -> Self {
-        GpuNode { min: n.min, first: n.first, max: n.max, count: n.count }
-    }
-}
-
 // Environment kinds; mirror ENV_* in path.wgsl.
 pub(crate) const ENV_NONE: u32 = 0;
 pub(crate) const ENV_CONSTANT: u32 = 1;
@@ -400,10 +386,10 @@ pub(crate) fn environment(
 }
 
 /// The kernel's traversal stack; mirrors `STACK_SIZE` in the kernel.
-const STACK_SIZE: usize = 64;
+const STACK_SIZE: usize = 96;
 
 pub(crate) struct GpuScene {
-    pub nodes: Vec<GpuNode>,
+    pub nodes: Vec<GpuWideNode>,
     /// Triangles and, in slots of their own, analytic shapes (`e2.w` holds the bits of the shape's
     /// index + 1; 0 for a triangle), in the BVH's leaf order.
     pub tris: Vec<GpuTri>,
@@ -605,19 +591,23 @@ pub(crate) fn flatten(scene: &Scene) -> Result<GpuScene, TraceError> {
     let bounds: Vec<(Vec3, Vec3)> = slots.iter().map(|s| s.0).collect();
     let centroids: Vec<Vec3> = slots.iter().map(|s| s.1).collect();
     let bvh = Bvh::build_bounds(&bounds, &centroids);
-    if bvh.depth() > STACK_SIZE {
+    let wide = WideBvh::build(&bvh).map_err(TraceError::Invalid)?;
+    if wide.stack > STACK_SIZE {
         return Err(TraceError::Invalid(format!(
-            "the scene's BVH is {} levels deep; the kernel's traversal stack holds {STACK_SIZE}",
-            bvh.depth()
+            "the scene's BVH needs {} traversal stack entries; the kernel's stack holds {STACK_SIZE}",
+            wide.stack
         )));
     }
+    // The slots in the order the wide nodes' leaves refer to them.
+    let order: Vec<u32> =
+        if tris.is_empty() { Vec::new() } else { wide.order.iter().map(|&k| bvh.order[k as usize]).collect() };
     let mut new_index = vec![0u32; tris.len()];
-    for (k, &old) in bvh.order.iter().enumerate() {
+    for (k, &old) in order.iter().enumerate() {
         new_index[old as usize] = k as u32;
     }
-    let mut tris: Vec<GpuTri> = bvh.order.iter().map(|&i| tris[i as usize]).collect();
-    let normals: Vec<GpuNormals> = bvh.order.iter().map(|&i| normals[i as usize]).collect();
-    let areas: Vec<f32> = bvh.order.iter().map(|&i| slots[i as usize].2).collect();
+    let mut tris: Vec<GpuTri> = order.iter().map(|&i| tris[i as usize]).collect();
+    let normals: Vec<GpuNormals> = order.iter().map(|&i| normals[i as usize]).collect();
+    let areas: Vec<f32> = order.iter().map(|&i| slots[i as usize].2).collect();
     for (tri, _) in light_weights.iter_mut() {
         *tri = new_index[*tri as usize];
     }
@@ -633,7 +623,7 @@ pub(crate) fn flatten(scene: &Scene) -> Result<GpuScene, TraceError> {
     if let Some(last) = lights.last_mut() {
         last.cdf = 1.0;
     }
-    let nodes = bvh.nodes.into_iter().map(GpuNode::from).collect();
+    let nodes = wide.nodes;
     let env = environment(scene.environment.as_ref(), &mut aux, !lights.is_empty())?;
     Ok(GpuScene {
         nodes,
