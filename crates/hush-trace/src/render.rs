@@ -137,6 +137,11 @@ pub struct Renderer<'a> {
     pipelines: Mutex<Pipelines>,
 }
 
+/// Shapes that the kernel reads from a uniform buffer (`UNIFORM_SHAPES` in shapes.wgsl): 64 KiB, the
+/// least every device allows. CPU drivers gather a uniform buffer's words for all SIMD lanes at once
+/// but load a storage buffer's lane by lane, word by word.
+pub(crate) const UNIFORM_SHAPES: usize = 585;
+
 /// Kernels with scene data written in that a [`Renderer`] keeps compiled: a dataset renders a
 /// scene many times in a row, and each scene's kernel holds at most about 100 KB of source.
 pub const MAX_CACHED_KERNELS: usize = 8;
@@ -181,6 +186,7 @@ impl<'a> Renderer<'a> {
                 buffer(7, read),
                 buffer(8, uniform),
                 buffer(9, read),
+                buffer(10, uniform),
             ],
         });
         let layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -219,6 +225,7 @@ impl<'a> Renderer<'a> {
             ("HAS_BECKMANN", flag(features.beckmann)),
             ("FLAT_SCAN", flag(features.flat_scan)),
             ("HAS_SHAPES", flag(features.shapes)),
+            ("HAS_MANY_SHAPES", flag(features.many_shapes)),
             ("HAS_SHADING_NORMALS", flag(features.shading_normals)),
             ("HAS_WIDE_FILTER", flag(features.wide_filter)),
         ];
@@ -324,6 +331,16 @@ impl<'a> Renderer<'a> {
         let lights = storage("lights", bytemuck::cast_slice::<GpuLight, u8>(&flat.lights));
         let nodes = storage("bvh", bytemuck::cast_slice::<GpuWideNode, u8>(&flat.nodes));
         let shapes = storage("shapes", bytemuck::cast_slice::<GpuShape, u8>(&flat.shapes));
+        let first_shapes = {
+            let mut bytes = vec![0u8; UNIFORM_SHAPES * std::mem::size_of::<GpuShape>()];
+            let first = &flat.shapes[..flat.shapes.len().min(UNIFORM_SHAPES)];
+            bytes[..std::mem::size_of_val(first)].copy_from_slice(bytemuck::cast_slice::<GpuShape, u8>(first));
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("first shapes"),
+                contents: &bytes,
+                usage: wgpu::BufferUsages::UNIFORM,
+            })
+        };
         let aux_bytes = flat.aux.len() as u64 * 4;
         if aux_bytes > limit {
             return Err(TraceError::Invalid(format!(
@@ -374,6 +391,7 @@ impl<'a> Renderer<'a> {
                 wgpu::BindGroupEntry { binding: 7, resource: aux.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 8, resource: env.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 9, resource: shapes.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 10, resource: first_shapes.as_entire_binding() },
             ],
         });
 

@@ -17,6 +17,21 @@ struct Shape {
 }
 
 @group(0) @binding(9) var<storage, read> shapes: array<Shape>;
+// The first UNIFORM_SHAPES shapes again, in a uniform buffer: CPU drivers load a uniform
+// buffer's words for all SIMD lanes at once (a gather), a storage buffer's lane by lane (hush_trace's
+// `UNIFORM_SHAPES`; 585 records of 112 bytes fill the 64 KiB every device offers).
+const UNIFORM_SHAPES: u32 = 585u;
+@group(0) @binding(10) var<uniform> first_shapes: array<Shape, UNIFORM_SHAPES>;
+
+// Specialization: the scene has more shapes than UNIFORM_SHAPES.
+override HAS_MANY_SHAPES: bool = true;
+
+fn shape_at(k: u32) -> Shape {
+    if !HAS_MANY_SHAPES || k < UNIFORM_SHAPES {
+        return first_shapes[k];
+    }
+    return shapes[k];
+}
 
 // Specialization: the scene has analytic shapes.
 override HAS_SHAPES: bool = true;
@@ -122,7 +137,7 @@ fn test_triangle_rows(i: u32, r0: vec4<f32>, r1: vec4<f32>, r2: vec4<f32>, o: ve
 
 // Shape k of the buffer, in slot i, with the slot's material and light density.
 fn test_shape(i: u32, k: u32, mat: u32, area_pdf: f32, o: vec3<f32>, d: vec3<f32>, hit: ptr<function, Hit>) {
-    let s = shapes[k];
+    let s = shape_at(k);
     let kind = bitcast<u32>(s.info.x);
     let l0 = select(s.l0, vec4<f32>(s.w0.w, s.w1.w, s.w2.w, s.info.w), kind == SHAPE_SPHERE);
     if test_shape_at(i, kind, l0, s.l1, s.l2, o, d, hit) {
@@ -145,7 +160,7 @@ struct ShapeSurface {
 }
 
 fn shape_surface(k: u32, p: vec3<f32>) -> ShapeSurface {
-    let s = shapes[k];
+    let s = shape_at(k);
     let kind = bitcast<u32>(s.info.x);
     let pl = affine(s.l0, s.l1, s.l2, p);
     var n = vec3<f32>(0.0);
@@ -189,7 +204,7 @@ fn sphere_light_outside(s: Shape, p: vec3<f32>) -> bool {
 // (normal n) seen along unit wi at distance dist; `pick` is the probability per unit area the
 // light slot has (its pick probability over the shape's area).
 fn shape_light_pdf(k: u32, pick: f32, p: vec3<f32>, wi: vec3<f32>, dist: f32, n: vec3<f32>) -> f32 {
-    let s = shapes[k];
+    let s = shape_at(k);
     if bitcast<u32>(s.info.x) == SHAPE_SPHERE && sphere_light_outside(s, p) {
         let dc = vec3<f32>(s.w0.w, s.w1.w, s.w2.w) - p;
         let s2 = min(s.info.w * s.info.w / dot(dc, dc), 1.0);
@@ -207,7 +222,7 @@ struct ShapeLightSample {
 // `sample_direction`, after akalin.com/sampling-visible-sphere) when p is outside it, every
 // other case uniformly by area; `shape_light_pdf` gives the density.
 fn shape_light_sample(k: u32, p: vec3<f32>, u: vec2<f32>) -> ShapeLightSample {
-    let s = shapes[k];
+    let s = shape_at(k);
     let kind = bitcast<u32>(s.info.x);
     let phi = 2.0 * PI * u.y;
     if kind == SHAPE_SPHERE {

@@ -415,6 +415,9 @@ pub struct KernelFeatures {
     pub flat_scan: bool,
     /// Some mesh is an analytic shape.
     pub shapes: bool,
+    /// More analytic shapes than the kernel's uniform buffer of shapes holds (`UNIFORM_SHAPES`):
+    /// the rest are read from a storage buffer.
+    pub many_shapes: bool,
     /// Some mesh has vertex normals (interpolated shading normals).
     pub shading_normals: bool,
     /// The film's pixel filter is a tent or a gaussian (sampled in a loop; the box is one draw).
@@ -457,6 +460,7 @@ impl KernelFeatures {
         beckmann: true,
         flat_scan: false,
         shapes: true,
+        many_shapes: true,
         shading_normals: true,
         wide_filter: true,
     };
@@ -470,6 +474,7 @@ impl KernelFeatures {
         beckmann: false,
         flat_scan: false,
         shapes: false,
+        many_shapes: false,
         shading_normals: false,
         wide_filter: false,
     };
@@ -482,6 +487,13 @@ impl KernelFeatures {
                 + scene.meshes.iter().filter_map(|m| m.analytic).map(|a| flat_scan_cost(a.kind)).sum::<usize>()
                 <= FLAT_SCAN_MAX_TRIANGLES,
             shapes: scene.analytic_count() > 0,
+            many_shapes: scene
+                .meshes
+                .iter()
+                .filter_map(|m| m.analytic)
+                .map(|a| if a.kind == hush_scene::ShapeKind::Cube { 6 } else { 1 })
+                .sum::<usize>()
+                > crate::render::UNIFORM_SHAPES,
             ..KernelFeatures::NONE
         };
         f.shading_normals = scene.meshes.iter().any(|m| m.normals.is_some() && m.analytic.is_none());
@@ -625,15 +637,7 @@ pub(crate) fn flatten(scene: &Scene) -> Result<GpuScene, TraceError> {
     }
     let nodes = wide.nodes;
     let env = environment(scene.environment.as_ref(), &mut aux, !lights.is_empty())?;
-    Ok(GpuScene {
-        nodes,
-        tris,
-        shapes,
-        normals,
-        materials,
-        lights,
-        aux: aux.data,
-        env,
-        features: KernelFeatures::of(scene),
-    })
+    let features = KernelFeatures::of(scene);
+    debug_assert_eq!(features.many_shapes, shapes.len() > crate::render::UNIFORM_SHAPES, "shapes counted as flattened");
+    Ok(GpuScene { nodes, tris, shapes, normals, materials, lights, aux: aux.data, env, features })
 }
