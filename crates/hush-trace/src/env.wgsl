@@ -107,23 +107,11 @@ fn env_eval(d: vec3<f32>) -> vec3<f32> {
     return env_map_eval(env_cell(env_to_local(d)));
 }
 
-// Index of the first entry of the `n` increasing CDF values at aux[base..] that exceeds u.
-fn cdf_search(base: u32, n: u32, u: f32) -> u32 {
-    var lo = 0u;
-    var hi = n - 1u;
-    while lo < hi {
-        let mid = (lo + hi) / 2u;
-        if aux[base + mid] <= u {
-            lo = mid + 1u;
-        } else {
-            hi = mid;
-        }
-    }
-    return lo;
-}
-
-fn cdf_prob(base: u32, i: u32) -> f32 {
-    return aux[base + i] - select(0.0, aux[base + i - 1u], i > 0u);
+// The map's sampling distribution over its interpolation cells, from `dist` in `aux`: per cell
+// (row-major, width × (height − 1)) the probability of keeping it when drawn uniformly, the cell
+// that replaces it otherwise (bits), and its probability (Walker's alias method, upload.rs).
+fn env_cell_prob(cell: u32) -> f32 {
+    return aux[env.dist + 3u * cell + 2u];
 }
 
 // Solid-angle density of env_sample (before the light-picking probability).
@@ -134,9 +122,7 @@ fn env_pdf(d: vec3<f32>) -> f32 {
     let c = env_cell(env_to_local(d));
     let w = aux_u32(env.image);
     let ny = aux_u32(env.image + 1u) - 1u;
-    let marginal = env.dist;
-    let conditional = marginal + ny + c.cell.y * w;
-    let p = cdf_prob(marginal, c.cell.y) * cdf_prob(conditional, c.cell.x) * f32(w * ny);
+    let p = env_cell_prob(c.cell.y * w + c.cell.x) * f32(w * ny);
     return p / (2.0 * PI * PI * c.sin_theta);
 }
 
@@ -148,8 +134,8 @@ struct EnvSample {
 
 // A direction toward the environment: uniform over the sphere for a constant one; for a map,
 // a cell picked from the piecewise-constant distribution over its interpolation cells
-// (luminance × sin θ) and a uniform point inside it.
-fn env_sample(u: vec2<f32>) -> EnvSample {
+// (luminance × sin θ; u.x and u.y by the alias method) and a uniform point inside it (u.z, u.w).
+fn env_sample(u: vec4<f32>) -> EnvSample {
     if env.kind == ENV_CONSTANT {
         let z = 1.0 - 2.0 * u.x;
         let r = sqrt(max(0.0, 1.0 - z * z));
@@ -158,14 +144,14 @@ fn env_sample(u: vec2<f32>) -> EnvSample {
     }
     let w = aux_u32(env.image);
     let ny = aux_u32(env.image + 1u) - 1u;
-    let marginal = env.dist;
-    let row = cdf_search(marginal, ny, u.x);
-    let p_row = cdf_prob(marginal, row);
-    let fy = clamp((u.x - select(0.0, aux[marginal + row - 1u], row > 0u)) / p_row, 0.0, 1.0);
-    let conditional = marginal + ny + row * w;
-    let col = cdf_search(conditional, w, u.y);
-    let p_col = cdf_prob(conditional, col);
-    let fx = clamp((u.y - select(0.0, aux[conditional + col - 1u], col > 0u)) / p_col, 0.0, 1.0);
+    let n = w * ny;
+    let drawn = min(u32(u.x * f32(n)), n - 1u);
+    let keep = aux[env.dist + 3u * drawn];
+    let cell = select(aux_u32(env.dist + 3u * drawn + 1u), drawn, u.y < keep);
+    let row = cell / w;
+    let col = cell % w;
+    let fx = u.z;
+    let fy = u.w;
     let uu = (f32(col) + fx) / f32(w) + 0.5 / f32(w);
     let v = (f32(row) + fy) / f32(ny);
     let theta = PI * v;
@@ -173,7 +159,7 @@ fn env_sample(u: vec2<f32>) -> EnvSample {
     let st = sin(theta);
     let local = vec3<f32>(sin(phi) * st, cos(theta), -cos(phi) * st);
     let sin_theta = max(st, 1e-7);
-    let pdf = p_row * p_col * f32(w * ny) / (2.0 * PI * PI * sin_theta);
+    let pdf = env_cell_prob(cell) * f32(n) / (2.0 * PI * PI * sin_theta);
     let c = EnvCell(vec2<u32>(col, row), vec2<f32>(fx, fy), sin_theta);
     return EnvSample(env_to_world(local), pdf, env_map_eval(c));
 }

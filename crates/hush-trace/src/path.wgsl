@@ -553,7 +553,7 @@ fn bounce(st: ptr<function, PathState>) -> bool {
         var lp = vec3<f32>(0.0);
         var to_env = true;
         if rand() < env_pick {
-            let es = env_sample(vec2<f32>(rand(), rand()));
+            let es = env_sample(vec4<f32>(rand(), rand(), rand(), rand()));
             wi = es.d;
             light_pdf = env_pick * es.pdf;
             radiance = es.radiance;

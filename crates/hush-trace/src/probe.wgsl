@@ -87,21 +87,21 @@ fn env_probe_main(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     var h = hash(i ^ hash(probe.seed));
-    var u: array<f32, 4>;
-    for (var k = 0u; k < 4u; k++) {
+    var u: array<f32, 6>;
+    for (var k = 0u; k < 6u; k++) {
         h = hash(h);
         u[k] = unit(h);
     }
-    let s = env_sample(vec2<f32>(u[0], u[1]));
+    let s = env_sample(vec4<f32>(u[0], u[1], u[2], u[3]));
     var w = vec3<f32>(0.0);
     var mismatch = 0.0;
     if s.pdf > 0.0 {
         w = s.radiance / s.pdf;
         mismatch = abs(s.pdf - env_pdf(s.d)) / s.pdf;
     }
-    let z = 1.0 - 2.0 * u[2];
+    let z = 1.0 - 2.0 * u[4];
     let r = sqrt(max(0.0, 1.0 - z * z));
-    let phi = 2.0 * PI * u[3];
+    let phi = 2.0 * PI * u[5];
     let wu = vec3<f32>(r * cos(phi), r * sin(phi), z);
     let inv_p = 4.0 * PI;
     let lu = env_eval(wu) * inv_p;
