@@ -58,6 +58,10 @@ struct Env {
 // ---- environment (Mitsuba's `constant` and `envmap` emitters) ----
 
 const ENV_NONE: u32 = 0u;
+// Specialization: the environment may be a map. Without it the map's code is compiled out; a
+// branch on `env.kind` alone leaves it in, and CPU drivers step through its loads lane by lane
+// with every lane masked off.
+override HAS_ENV_MAP: bool = true;
 const ENV_CONSTANT: u32 = 1u;
 const ENV_MAP: u32 = 2u;
 
@@ -101,7 +105,7 @@ fn env_map_eval(c: EnvCell) -> vec3<f32> {
 
 // Radiance arriving along -d (d points away from the scene, world space).
 fn env_eval(d: vec3<f32>) -> vec3<f32> {
-    if env.kind == ENV_CONSTANT {
+    if !HAS_ENV_MAP || env.kind == ENV_CONSTANT {
         return env.radiance.xyz;
     }
     return env_map_eval(env_cell(env_to_local(d)));
@@ -116,7 +120,7 @@ fn env_cell_prob(cell: u32) -> f32 {
 
 // Solid-angle density of env_sample (before the light-picking probability).
 fn env_pdf(d: vec3<f32>) -> f32 {
-    if env.kind == ENV_CONSTANT {
+    if !HAS_ENV_MAP || env.kind == ENV_CONSTANT {
         return 0.25 * INV_PI;
     }
     let c = env_cell(env_to_local(d));
@@ -136,7 +140,7 @@ struct EnvSample {
 // a cell picked from the piecewise-constant distribution over its interpolation cells
 // (luminance × sin θ; u.x and u.y by the alias method) and a uniform point inside it (u.z, u.w).
 fn env_sample(u: vec4<f32>) -> EnvSample {
-    if env.kind == ENV_CONSTANT {
+    if !HAS_ENV_MAP || env.kind == ENV_CONSTANT {
         let z = 1.0 - 2.0 * u.x;
         let r = sqrt(max(0.0, 1.0 - z * z));
         let phi = 2.0 * PI * u.y;

@@ -420,6 +420,8 @@ pub(crate) struct GpuScene {
 pub struct KernelFeatures {
     pub textures: bool,
     pub environment: bool,
+    /// The environment is an image (Mitsuba's `envmap`), not a constant.
+    pub environment_map: bool,
     pub rough_dielectric: bool,
     pub rough_plastic: bool,
     pub beckmann: bool,
@@ -468,6 +470,7 @@ impl KernelFeatures {
     pub const ALL: KernelFeatures = KernelFeatures {
         textures: true,
         environment: true,
+        environment_map: true,
         rough_dielectric: true,
         rough_plastic: true,
         beckmann: true,
@@ -482,6 +485,7 @@ impl KernelFeatures {
     pub const NONE: KernelFeatures = KernelFeatures {
         textures: false,
         environment: false,
+        environment_map: false,
         rough_dielectric: false,
         rough_plastic: false,
         beckmann: false,
@@ -496,6 +500,7 @@ impl KernelFeatures {
     pub fn of(scene: &Scene) -> KernelFeatures {
         let mut f = KernelFeatures {
             environment: scene.environment.is_some(),
+            environment_map: matches!(scene.environment, Some(Environment::Map(_))),
             flat_scan: scene.mesh_triangle_count()
                 + scene.meshes.iter().filter_map(|m| m.analytic).map(|a| flat_scan_cost(a.kind)).sum::<usize>()
                 <= FLAT_SCAN_MAX_TRIANGLES,

@@ -552,7 +552,7 @@ fn specialized_kernel_renders_what_the_generic_one_does() {
         (dir.join("roughplastic"), KernelFeatures { rough_plastic: true, ..walls }),
         // Only shapes: intersected by a flat scan instead of the BVH walk of the generic kernel.
         (dir.join("textured"), KernelFeatures { textures: true, flat_scan: true, ..walls }),
-        (dir.join("envmap"), KernelFeatures { environment: true, ..walls }),
+        (dir.join("envmap"), KernelFeatures { environment: true, environment_map: true, ..walls }),
         (cbox_dir(), KernelFeatures { flat_scan: true, ..KernelFeatures::NONE }),
     ] {
         let name = path.file_name().unwrap().to_string_lossy().to_string();
