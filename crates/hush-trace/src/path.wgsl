@@ -77,6 +77,9 @@ const T_MAX: f32 = 3.0e38;
 // Specialization (see bsdf.wgsl): textures, the environment, vertex normals.
 override HAS_TEXTURES: bool = true;
 override HAS_ENV: bool = true;
+// Specialization: some triangle or shape emits. Without it, next-event estimation's light side is
+// compiled out (a branch on a random number alone runs it with every lane masked off on CPU drivers).
+override HAS_LIGHTS: bool = true;
 override HAS_SHADING_NORMALS: bool = true;
 // The film's filter is a tent or a gaussian (false: a box).
 override HAS_WIDE_FILTER: bool = true;
@@ -552,7 +555,8 @@ fn bounce(st: ptr<function, PathState>) -> bool {
         var radiance = vec3<f32>(0.0);
         var lp = vec3<f32>(0.0);
         var to_env = true;
-        if rand() < env_pick {
+        let pick_env = rand() < env_pick;
+        if !HAS_LIGHTS || pick_env {
             let es = env_sample(vec4<f32>(rand(), rand(), rand(), rand()));
             wi = es.d;
             light_pdf = env_pick * es.pdf;

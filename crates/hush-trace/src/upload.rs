@@ -422,6 +422,8 @@ pub struct KernelFeatures {
     pub environment: bool,
     /// The environment is an image (Mitsuba's `envmap`), not a constant.
     pub environment_map: bool,
+    /// Some triangle or shape emits: next-event estimation samples lights as well as the environment.
+    pub lights: bool,
     pub rough_dielectric: bool,
     pub rough_plastic: bool,
     pub beckmann: bool,
@@ -471,6 +473,7 @@ impl KernelFeatures {
         textures: true,
         environment: true,
         environment_map: true,
+        lights: true,
         rough_dielectric: true,
         rough_plastic: true,
         beckmann: true,
@@ -486,6 +489,7 @@ impl KernelFeatures {
         textures: false,
         environment: false,
         environment_map: false,
+        lights: false,
         rough_dielectric: false,
         rough_plastic: false,
         beckmann: false,
@@ -501,6 +505,9 @@ impl KernelFeatures {
         let mut f = KernelFeatures {
             environment: scene.environment.is_some(),
             environment_map: matches!(scene.environment, Some(Environment::Map(_))),
+            lights: scene.meshes.iter().any(|m| {
+                m.emission.is_some_and(|e| e.max_element() > 0.0) && (m.analytic.is_some() || !m.indices.is_empty())
+            }),
             flat_scan: scene.mesh_triangle_count()
                 + scene.meshes.iter().filter_map(|m| m.analytic).map(|a| flat_scan_cost(a.kind)).sum::<usize>()
                 <= FLAT_SCAN_MAX_TRIANGLES,
@@ -657,6 +664,7 @@ pub(crate) fn flatten(scene: &Scene) -> Result<GpuScene, TraceError> {
     let env = environment(scene.environment.as_ref(), &mut aux, !lights.is_empty())?;
     let features = KernelFeatures::of(scene);
     debug_assert_eq!(features.many_shapes, shapes.len() > crate::render::UNIFORM_SHAPES, "shapes counted as flattened");
+    debug_assert_eq!(features.lights, !lights.is_empty(), "emitters counted as flattened");
     Ok(GpuScene { nodes, tris, shapes, normals, materials, lights, aux: aux.data, env, features })
 }
 
