@@ -158,7 +158,7 @@ const INDEX_MASK: u32 = 0x3ffffffu;
 fn wide_child(n: WideNode, corner: vec3<f32>, step: vec3<f32>, c: u32, kind: u32, next: ptr<function, vec2<u32>>, o: vec3<f32>, inv_d: vec3<f32>, t_max: f32) -> Child {
     let lo = corner + bytes_at(n.b.x, n.b.y, n.b.z, c) * step;
     let hi = corner + bytes_at(n.b.w, n.c.x, n.c.y, c) * step;
-    var t = enter(lo, hi, o, inv_d, t_max);
+    let t = enter(lo, hi, o, inv_d, t_max);
     var entry = 0u;
     if kind == KIND_INTERIOR {
         entry = ((*next).x << 3u) | KIND_INTERIOR;

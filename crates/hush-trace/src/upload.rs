@@ -516,7 +516,7 @@ impl KernelFeatures {
                 .meshes
                 .iter()
                 .filter_map(|m| m.analytic)
-                .map(|a| if a.kind == hush_scene::ShapeKind::Cube { 6 } else { 1 })
+                .map(|a| if a.kind == hush_scene::ShapeKind::Cube { a.cube_faces().len() } else { 1 })
                 .sum::<usize>()
                 > crate::render::UNIFORM_SHAPES,
             ..KernelFeatures::NONE

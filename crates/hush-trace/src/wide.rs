@@ -49,7 +49,7 @@ pub(crate) struct WideBvh {
     pub stack: usize,
 }
 
-/// A child of a wide node: an interior node or a leaf of the binary hierarchy.
+/// Whether a binary node is a leaf (it holds triangles).
 fn is_leaf(n: &BvhNode) -> bool {
     n.count > 0
 }
