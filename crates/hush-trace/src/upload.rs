@@ -304,7 +304,8 @@ fn luminance(rgb: &[f32]) -> f64 {
     0.212671 * rgb[0] as f64 + 0.715160 * rgb[1] as f64 + 0.072169 * rgb[2] as f64
 }
 
-/// Appends a CDF of `weights` (normalized; uniform if they are all 0) and returns their sum.
+/// Appends Walker's alias table of `weights` (normalized; uniform if they are all 0), per cell the
+/// probability of keeping it, its alias (bits) and its probability, and returns their sum.
 fn push_alias(aux: &mut Vec<f32>, weights: &[f64]) -> f64 {
     let n = weights.len();
     let total: f64 = weights.iter().sum();
@@ -636,8 +637,7 @@ pub(crate) fn flatten(scene: &Scene) -> Result<GpuScene, TraceError> {
         )));
     }
     // The slots in the order the wide nodes' leaves refer to them.
-    let order: Vec<u32> =
-        if tris.is_empty() { Vec::new() } else { wide.order.iter().map(|&k| bvh.order[k as usize]).collect() };
+    let order: Vec<u32> = wide.order.iter().map(|&k| bvh.order[k as usize]).collect();
     let mut new_index = vec![0u32; tris.len()];
     for (k, &old) in order.iter().enumerate() {
         new_index[old as usize] = k as u32;
