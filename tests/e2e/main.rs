@@ -33,6 +33,10 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
+fn strs(args: &[String]) -> Vec<&str> {
+    args.iter().map(String::as_str).collect()
+}
+
 /// Runs hush expecting failure; returns stderr after checking it is an error, not a panic.
 fn expect_error(args: &[&str]) -> String {
     let out = hush(args);
@@ -118,20 +122,13 @@ fn render_writes_every_layer() {
     let dir = scratch("render");
     let out = dir.join("box.exr");
     let stats = dir.join("stats.json");
-    let stderr = expect_success(&[
-        "render",
-        s(&cbox()),
-        "--spp",
-        "2",
-        "--width",
-        "24",
-        "--height",
-        "16",
-        "--out",
-        s(&out),
-        "--stats",
-        s(&stats),
-    ]);
+    let scene = cbox();
+    let render = |out: &Path, stats: &Path| {
+        ["render", s(&scene), "--spp", "2", "--width", "24", "--height", "16", "--out", s(out), "--stats", s(stats)]
+            .map(String::from)
+            .to_vec()
+    };
+    let stderr = expect_success(&strs(&render(&out, &stats)));
     // The box's kernel holds its triangles, materials and lights as literals, and says so.
     assert!(
         stderr.contains("scene data written into the kernel: 36 triangles, 8 materials, 2 light triangles"),
@@ -162,6 +159,18 @@ fn render_writes_every_layer() {
     assert_eq!((exr.width, exr.height), (24, 16));
     let stats: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
     assert_eq!(stats["paths"].as_f64(), Some(24.0 * 16.0 * 2.0));
+    assert!(stats["warm_up_cpu_seconds"].is_null(), "no warm-up was asked for: {stats}");
+
+    // `--warm-up` renders 1 spp before the timed render with the same kernel: the timed render's image
+    // is the same to the bit, its statistics count only its own paths, and the warm-up's CPU-seconds
+    // are recorded beside.
+    let warm = dir.join("warm.exr");
+    let warm_stats = dir.join("warm-stats.json");
+    expect_success(&[&strs(&render(&warm, &warm_stats))[..], &["--warm-up"]].concat());
+    assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&warm).unwrap(), "the warm-up changed the image");
+    let stats: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&warm_stats).unwrap()).unwrap();
+    assert_eq!(stats["paths"].as_f64(), Some(24.0 * 16.0 * 2.0));
+    assert!(stats["warm_up_cpu_seconds"].as_f64().is_some_and(|s| s > 0.0), "{stats}");
 }
 
 /// `--time-limit` shorter than one pass renders one pass and records the spp it reached; the

@@ -10,10 +10,11 @@
 //! Reported per renderer: M paths (= samples) per CPU-second and, where an independent reference
 //! exists (the box: Mitsuba's 1792-spp render in `../shared/reference/mitsuba-cbox`),
 //! relMSE × CPU-seconds. CPU-seconds count every thread of the process: hush's from its own stats
-//! (after the scene load and the GPU set-up, with the upload and BVH build; each kernel comes from
-//! the driver's shader cache, which a 1-spp 8×8 render of the scene fills first), Mitsuba's from
-//! getrusage around a second render whose kernels come from Dr.Jit's cache (see
-//! `xtask/mitsuba_tool.py`; its scene load and BVH build are not counted). relMSE is computed by
+//! (after the scene load and the GPU set-up, with the upload and BVH build, of a render whose
+//! kernel an untimed 1-spp render in the same process compiled first: `hush render --warm-up`,
+//! whose CPU-seconds are recorded beside as `warm_up_cpu_seconds`), Mitsuba's from getrusage around
+//! a second render whose kernels come from Dr.Jit's cache (see `xtask/mitsuba_tool.py`; its scene
+//! load, BVH build and first render, `cold_render_cpu_seconds`, are not counted). relMSE is computed by
 //! Python in Mitsuba's venv (xtask reads no EXR). Without Mitsuba the hush half still runs and
 //! Mitsuba is reported as skipped with the command that installs it; without `../shared`, only
 //! the box runs.
@@ -222,23 +223,9 @@ fn render(args: &[String]) -> Result<()> {
             if generic {
                 cmd.arg("--generic");
             }
-            // Compile the kernel once untimed, as Mitsuba's timed render reuses its JIT's kernels.
-            let mut warm = Command::new(&hush);
-            warm.arg("render").arg(&scene).args([
-                "--spp",
-                "1",
-                "--width",
-                "8",
-                "--height",
-                "8",
-                "--max-depth",
-                &size[2],
-            ]);
-            warm.arg("--out").arg(dir.join(format!("warm-up-{}-{kind}.exr", sc.name)));
-            if generic {
-                warm.arg("--generic");
-            }
-            spawn(&mut warm)?;
+            // The kernel is compiled by an untimed 1-spp render in the same process first, as Mitsuba's
+            // timed render is its second in one process and reuses its JIT's kernels.
+            cmd.arg("--warm-up");
             spawn(&mut cmd)?;
             let s = read_json(&stats)?;
             hush_runs.push((
@@ -247,6 +234,7 @@ fn render(args: &[String]) -> Result<()> {
                     "mpaths_per_cpu_second": s["mpaths_per_cpu_second"],
                     "mpaths_per_second": s["mpaths_per_second"],
                     "cpu_seconds": s["cpu_seconds"],
+                    "warm_up_cpu_seconds": s["warm_up_cpu_seconds"],
                     "wall_seconds": s["wall_seconds"],
                     "non_finite_values": s["non_finite_values"],
                     "adapter": s["adapter"],

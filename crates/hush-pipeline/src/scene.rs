@@ -101,6 +101,9 @@ pub struct RenderStats {
     pub non_finite_values: usize,
     pub discarded_samples: u64,
     pub mean_luminance: f64,
+    /// With `hush render --warm-up`: the CPU-seconds of the untimed 1-spp render before the timed
+    /// one, most of it compiling the kernel specialized to the scene (not in `cpu_seconds`).
+    pub warm_up_cpu_seconds: Option<f64>,
 }
 
 impl RenderStats {
@@ -132,6 +135,7 @@ impl RenderStats {
             non_finite_values: out.color.count_non_finite(),
             discarded_samples: out.discarded_samples,
             mean_luminance: mean_luminance(&out.color),
+            warm_up_cpu_seconds: None,
         }
     }
 }

@@ -138,6 +138,11 @@ pub struct RenderArgs {
     /// for speed comparisons).
     #[arg(long)]
     pub generic: bool,
+    /// Render 1 spp first, untimed, with the same kernel, so that the timed render (and its
+    /// --stats) excludes compiling the kernel, as a peer renderer's second render in one process
+    /// does; for speed comparisons. The warm-up's CPU-seconds are recorded beside.
+    #[arg(long)]
+    pub warm_up: bool,
 }
 
 #[derive(Args, Debug)]

@@ -29,6 +29,13 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let renderer = Renderer::new(&gpu)?.with_generic_kernel(args.generic);
     let kernel = if args.generic { KernelFeatures::ALL } else { KernelFeatures::of(&scene) };
     eprintln!("scene: {} triangles; kernel: {kernel:?}", scene.triangle_count());
+    let warm_up_cpu = if args.warm_up {
+        let cpu0 = cpu_seconds();
+        renderer.render(&scene, &RenderSettings { spp: 1, seed: args.seed }, &mut |_, _| {})?;
+        Some(cpu_seconds() - cpu0)
+    } else {
+        None
+    };
     let cpu0 = cpu_seconds();
     let settings = RenderSettings { spp, seed: args.seed };
     let out = crate::progress::render(&renderer, &scene, &settings, time_limit, "render")?;
@@ -51,7 +58,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
     if let Some(png) = &args.png {
         write_png_preview(png, &out.color, 1.0)?;
     }
-    let stats = RenderStats::new(&args.scene, &scene, &out, cpu, gpu.describe(), args.time_limit);
+    let mut stats = RenderStats::new(&args.scene, &scene, &out, cpu, gpu.describe(), args.time_limit);
+    stats.warm_up_cpu_seconds = warm_up_cpu;
     eprintln!(
         "{}×{} at {} spp ({} pass{}) in {:.2} s ({:.2} CPU-s): {:.3} M paths/s, {:.3} M paths per CPU-second → {}",
         stats.width,
