@@ -235,6 +235,21 @@ fn finish_hit(hit: ptr<function, Hit>) {
     }
 }
 
+// What `pop` returns when no entry is left: a leaf of no triangles, which no child's entry is.
+const WALK_END: u32 = 0u;
+
+// Pops the nearest stacked entry that the ray enters before `t` (the nearest hit so far), skipping those
+// behind it, or WALK_END when none is left.
+fn pop(stack: ptr<function, array<u32, STACK_SIZE>>, stack_t: ptr<function, array<f32, STACK_SIZE>>, sp: ptr<function, u32>, t: f32) -> u32 {
+    while *sp > 0u {
+        *sp -= 1u;
+        if (*stack_t)[*sp] < t {
+            return (*stack)[*sp];
+        }
+    }
+    return WALK_END;
+}
+
 // The nearest hit with t in (0, t_max); with `any`, the BVH walk returns the first hit it finds
 // (the flat scan finds the nearest either way).
 fn trace_ray(o: vec3<f32>, d: vec3<f32>, t_max: f32, any: bool) -> Hit {
@@ -253,17 +268,15 @@ fn trace_ray(o: vec3<f32>, d: vec3<f32>, t_max: f32, any: bool) -> Hit {
     var stack_t: array<f32, STACK_SIZE>;
     var sp = 0u;
     var entry = KIND_INTERIOR;
+    // While-while traversal (Aila and Laine 2009): each lane descends through interior nodes until it
+    // reaches a leaf, then the lanes at leaves test their triangles. On CPU drivers a branch runs both
+    // sides under a mask and only a loop's back edge skips work, so a step that did both an interior
+    // node and a leaf paid for both in every lane.
     loop {
-        let kind = entry & 7u;
-        if kind != KIND_INTERIOR {
-            let first = entry >> 3u;
-            for (var k = first; k < first + kind; k++) {
-                test_triangle(k, o, d, &hit);
+        loop {
+            if (entry & 7u) != KIND_INTERIOR {
+                break;
             }
-            if any && hit.tri != NO_HIT {
-                return hit;
-            }
-        } else {
             let n = nodes[entry >> 3u];
             let corner = bitcast<vec3<f32>>(n.a.xyz);
             let step = bitcast<vec3<f32>>((vec3<u32>(n.a.w, n.a.w >> 8u, n.a.w >> 16u) & vec3<u32>(0xffu)) << vec3<u32>(23u));
@@ -294,20 +307,23 @@ fn trace_ray(o: vec3<f32>, d: vec3<f32>, t_max: f32, any: bool) -> Hit {
                     sp += 1u;
                 }
                 entry = c0.entry;
-                continue;
+            } else {
+                entry = pop(&stack, &stack_t, &sp, hit.t);
             }
         }
-        // Pop the nearest entry the ray still enters before its nearest hit.
-        var found = false;
-        while sp > 0u {
-            sp -= 1u;
-            if stack_t[sp] < hit.t {
-                entry = stack[sp];
-                found = true;
-                break;
-            }
+        if entry == WALK_END {
+            break;
         }
-        if !found {
+        let first = entry >> 3u;
+        let kind = entry & 7u;
+        for (var k = first; k < first + kind; k++) {
+            test_triangle(k, o, d, &hit);
+        }
+        if any && hit.tri != NO_HIT {
+            return hit;
+        }
+        entry = pop(&stack, &stack_t, &sp, hit.t);
+        if entry == WALK_END {
             break;
         }
     }
