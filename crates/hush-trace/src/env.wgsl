@@ -12,9 +12,15 @@ fn image_texel(base: u32, width: u32, x: u32, y: u32) -> vec3<f32> {
     return vec3<f32>(aux[i], aux[i + 1u], aux[i + 2u]);
 }
 
-fn wrap(i: i32, n: u32) -> u32 {
-    let m = i32(n);
-    return u32(((i % m) + m) % m);
+// An integer-valued f modulo n, in [0, n). Computed in floating point: CPU drivers have no vector
+// integer division and run `%` lane by lane. Exact while |f| and n are below 2^24 (f / n is then off
+// by at most one after rounding, which the selections correct; n q is exact).
+fn wrap(f: f32, n: u32) -> u32 {
+    let m = f32(n);
+    var r = f - m * floor(f / m);
+    r = select(r, r - m, r >= m);
+    r = select(r, r + m, r < 0.0);
+    return min(u32(r), n - 1u);
 }
 
 // Mitsuba's `bitmap` lookup: bilinear between texel centres, repeating outside [0, 1]²;
@@ -25,8 +31,8 @@ fn texture_lookup(base: u32, uv: vec2<f32>) -> vec3<f32> {
     let pos = uv * vec2<f32>(f32(w), f32(h)) - 0.5;
     let f = floor(pos);
     let t = pos - f;
-    let x0 = wrap(i32(f.x), w);
-    let y0 = wrap(i32(f.y), h);
+    let x0 = wrap(f.x, w);
+    let y0 = wrap(f.y, h);
     let x1 = select(x0 + 1u, 0u, x0 + 1u == w);
     let y1 = select(y0 + 1u, 0u, y0 + 1u == h);
     let top = mix(image_texel(base, w, x0, y0), image_texel(base, w, x1, y0), t.x);
@@ -152,8 +158,12 @@ fn env_sample(u: vec4<f32>) -> EnvSample {
     let drawn = min(u32(u.x * f32(n)), n - 1u);
     let keep = aux[env.dist + 3u * drawn];
     let cell = select(aux_u32(env.dist + 3u * drawn + 1u), drawn, u.y < keep);
-    let row = cell / w;
-    let col = cell % w;
+    // cell / w and cell % w, by a floating-point quotient corrected to the exact one (CPU drivers run
+    // integer division lane by lane).
+    var row = u32((f32(cell) + 0.5) / f32(w));
+    row = select(row, row - 1u, row * w > cell);
+    row = select(row, row + 1u, (row + 1u) * w <= cell);
+    let col = cell - row * w;
     let fx = u.z;
     let fy = u.w;
     let uu = (f32(col) + fx) / f32(w) + 0.5 / f32(w);
