@@ -156,7 +156,8 @@ struct Pipelines {
 }
 
 impl<'a> Renderer<'a> {
-    /// Compiles the generic kernel. A shader the driver rejects is an error, not a panic.
+    /// Validates the generic kernel's source; each pipeline (the generic one, or one specialized to a
+    /// scene) is built when a render first needs it. A shader the driver rejects is an error, not a panic.
     pub fn new(gpu: &'a GpuContext) -> Result<Renderer<'a>, TraceError> {
         let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = gpu.device.create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -194,9 +195,7 @@ impl<'a> Renderer<'a> {
             bind_group_layouts: &[Some(&bind_layout)],
             immediate_size: 0,
         });
-        let renderer = Renderer { gpu, module, bind_layout, layout, generic: false, pipelines: Mutex::default() };
-        renderer.pipeline(KernelFeatures::ALL, None)?;
-        Ok(renderer)
+        Ok(Renderer { gpu, module, bind_layout, layout, generic: false, pipelines: Mutex::default() })
     }
 
     /// With `true`, every scene renders with the generic kernel (all features compiled in)
