@@ -2,7 +2,9 @@
 //! rough coat's directional albedo, integrated by Gauss–Legendre quadrature over the
 //! visible-normal sample square.
 
+use std::collections::HashMap;
 use std::f64::consts::PI;
+use std::sync::Mutex;
 
 /// Entries of the external-transmittance table, at cos θ = i / (N − 1); Mitsuba's
 /// `MI_ROUGH_TRANSMITTANCE_RES`.
@@ -245,10 +247,36 @@ fn albedo(dist: Distribution, alpha: f64, eta: f64, cos: f64, transmit: bool) ->
     0.25 * sum
 }
 
+/// Tables of [`plastic_tables`] this process has computed, by distribution and the bits of alpha and
+/// eta: each costs about a million quadrature points, and a dataset renders the same scene's
+/// materials dozens of times. Cleared when it reaches `MAX_MEMO_TABLES` entries (a quarter of a MiB).
+type PlasticKey = (Distribution, u32, u32);
+static PLASTIC_MEMO: Mutex<Option<HashMap<PlasticKey, ([f32; TABLE_SIZE], f32)>>> = Mutex::new(None);
+const MAX_MEMO_TABLES: usize = 1024;
+
 /// Mitsuba 3's `roughplastic` tables at cos θ = max(10⁻⁶, i / 63): the coat's transmittance
 /// (light that crosses the rough interface once), and the diffuse base's internal reflectance
-/// 2 · mean(reflectance_inside(cos) · cos) over the same points.
+/// 2 · mean(reflectance_inside(cos) · cos) over the same points; computed once per process for
+/// each (distribution, alpha, eta).
 pub(crate) fn plastic_tables(dist: Distribution, alpha: f32, eta: f32) -> ([f32; TABLE_SIZE], f32) {
+    let key = (dist, alpha.to_bits(), eta.to_bits());
+    // A poisoned lock only means another thread panicked while holding it; the map is still whole.
+    let mut memo = PLASTIC_MEMO.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(&t) = memo.as_ref().and_then(|m| m.get(&key)) {
+        return t;
+    }
+    drop(memo);
+    let t = compute_plastic_tables(dist, alpha, eta);
+    memo = PLASTIC_MEMO.lock().unwrap_or_else(|e| e.into_inner());
+    let map = memo.get_or_insert_with(HashMap::new);
+    if map.len() >= MAX_MEMO_TABLES {
+        map.clear();
+    }
+    map.insert(key, t);
+    t
+}
+
+fn compute_plastic_tables(dist: Distribution, alpha: f32, eta: f32) -> ([f32; TABLE_SIZE], f32) {
     let (alpha, eta) = ((alpha as f64).max(1e-4), eta as f64);
     let cos = |i: usize| (i as f64 / (TABLE_SIZE - 1) as f64).max(1e-6);
     let external = std::array::from_fn(|i| albedo(dist, alpha, eta, cos(i), true) as f32);
