@@ -251,14 +251,15 @@ fn albedo(dist: Distribution, alpha: f64, eta: f64, cos: f64, transmit: bool) ->
 /// eta: each costs about a million quadrature points, and a dataset renders the same scene's
 /// materials dozens of times. Cleared when it reaches `MAX_MEMO_TABLES` entries (a quarter of a MiB).
 type PlasticKey = (Distribution, u32, u32);
-static PLASTIC_MEMO: Mutex<Option<HashMap<PlasticKey, ([f32; TABLE_SIZE], f32)>>> = Mutex::new(None);
+type PlasticTables = ([f32; TABLE_SIZE], f32);
+static PLASTIC_MEMO: Mutex<Option<HashMap<PlasticKey, PlasticTables>>> = Mutex::new(None);
 const MAX_MEMO_TABLES: usize = 1024;
 
 /// Mitsuba 3's `roughplastic` tables at cos θ = max(10⁻⁶, i / 63): the coat's transmittance
 /// (light that crosses the rough interface once), and the diffuse base's internal reflectance
 /// 2 · mean(reflectance_inside(cos) · cos) over the same points; computed once per process for
 /// each (distribution, alpha, eta).
-pub(crate) fn plastic_tables(dist: Distribution, alpha: f32, eta: f32) -> ([f32; TABLE_SIZE], f32) {
+pub(crate) fn plastic_tables(dist: Distribution, alpha: f32, eta: f32) -> PlasticTables {
     let key = (dist, alpha.to_bits(), eta.to_bits());
     // A poisoned lock only means another thread panicked while holding it; the map is still whole.
     let mut memo = PLASTIC_MEMO.lock().unwrap_or_else(|e| e.into_inner());
@@ -276,7 +277,7 @@ pub(crate) fn plastic_tables(dist: Distribution, alpha: f32, eta: f32) -> ([f32;
     t
 }
 
-fn compute_plastic_tables(dist: Distribution, alpha: f32, eta: f32) -> ([f32; TABLE_SIZE], f32) {
+fn compute_plastic_tables(dist: Distribution, alpha: f32, eta: f32) -> PlasticTables {
     let (alpha, eta) = ((alpha as f64).max(1e-4), eta as f64);
     let cos = |i: usize| (i as f64 / (TABLE_SIZE - 1) as f64).max(1e-6);
     let external = std::array::from_fn(|i| albedo(dist, alpha, eta, cos(i), true) as f32);
