@@ -4,7 +4,7 @@
 
 use std::collections::HashMap;
 use std::f64::consts::PI;
-use std::sync::Mutex;
+use std::sync::{LazyLock, Mutex};
 
 /// Entries of the external-transmittance table, at cos θ = i / (N − 1); Mitsuba's
 /// `MI_ROUGH_TRANSMITTANCE_RES`.
@@ -252,7 +252,7 @@ fn albedo(dist: Distribution, alpha: f64, eta: f64, cos: f64, transmit: bool) ->
 /// materials dozens of times. Cleared when it reaches `MAX_MEMO_TABLES` entries (a quarter of a MiB).
 type PlasticKey = (Distribution, u32, u32);
 type PlasticTables = ([f32; TABLE_SIZE], f32);
-static PLASTIC_MEMO: Mutex<Option<HashMap<PlasticKey, PlasticTables>>> = Mutex::new(None);
+static PLASTIC_MEMO: LazyLock<Mutex<HashMap<PlasticKey, PlasticTables>>> = LazyLock::new(Default::default);
 const MAX_MEMO_TABLES: usize = 1024;
 
 /// Mitsuba 3's `roughplastic` tables at cos θ = max(10⁻⁶, i / 63): the coat's transmittance
@@ -263,17 +263,16 @@ pub(crate) fn plastic_tables(dist: Distribution, alpha: f32, eta: f32) -> Plasti
     let key = (dist, alpha.to_bits(), eta.to_bits());
     // A poisoned lock only means another thread panicked while holding it; the map is still whole.
     let mut memo = PLASTIC_MEMO.lock().unwrap_or_else(|e| e.into_inner());
-    if let Some(&t) = memo.as_ref().and_then(|m| m.get(&key)) {
+    if let Some(&t) = memo.get(&key) {
         return t;
     }
     drop(memo);
     let t = compute_plastic_tables(dist, alpha, eta);
     memo = PLASTIC_MEMO.lock().unwrap_or_else(|e| e.into_inner());
-    let map = memo.get_or_insert_with(HashMap::new);
-    if map.len() >= MAX_MEMO_TABLES {
-        map.clear();
+    if memo.len() >= MAX_MEMO_TABLES {
+        memo.clear();
     }
-    map.insert(key, t);
+    memo.insert(key, t);
     t
 }
 
