@@ -54,6 +54,31 @@ pub fn encode_samples(key: &str, samples: &[TrainSample]) -> Result<Vec<u8>> {
     Ok(out)
 }
 
+/// What differs between the key a cache was written under and the key now, part by part (keys are
+/// `, `-separated parts, such as the dataset's views, the preparation version, the features and the list of
+/// samples); a long part is shortened, since a list of hundreds of samples would bury the difference.
+fn key_difference(stored: &str, now: &str) -> String {
+    let shorten = |s: &str| {
+        let count = s.chars().count();
+        if count <= 120 {
+            s.to_string()
+        } else {
+            format!("{}… ({count} characters)", s.chars().take(100).collect::<String>())
+        }
+    };
+    let (then, now_parts): (Vec<&str>, Vec<&str>) = (stored.split(", ").collect(), now.split(", ").collect());
+    if then.len() != now_parts.len() {
+        return format!("{} then, {} now", shorten(stored), shorten(now));
+    }
+    let parts: Vec<String> = then
+        .iter()
+        .zip(&now_parts)
+        .filter(|(a, b)| a != b)
+        .map(|(a, b)| format!("{} then, {} now", shorten(a), shorten(b)))
+        .collect();
+    parts.join("; ")
+}
+
 /// The samples stored in `bytes`, if they are intact cache bytes written under `key`; otherwise a
 /// [`TrainError::Cache`] saying why (another key, another format, truncated, checksum mismatch).
 pub fn decode_samples(bytes: &[u8], key: &str) -> Result<Vec<TrainSample>> {
@@ -74,7 +99,7 @@ pub fn decode_samples(bytes: &[u8], key: &str) -> Result<Vec<TrainSample>> {
     let key_len = r.u32()? as usize;
     let stored_key = std::str::from_utf8(r.take(key_len)?).map_err(|_| bad("its key is not UTF-8".into()))?;
     if stored_key != key {
-        return Err(bad(format!("made from other data or settings ({stored_key}), now {key}")));
+        return Err(bad(format!("made from other data or settings: {}", key_difference(stored_key, key))));
     }
     let count = r.u32()? as usize;
     let mut shapes = Vec::with_capacity(count.min(1 << 16));

@@ -36,6 +36,15 @@ fn a_stale_or_damaged_cache_is_refused() {
         other => panic!("expected a cache error, got {:?}", other.map(|s| s.len())),
     };
     assert!(reason(&bytes, "manifest 4567, features hdr,alb,nrm").contains("other data or settings"));
+    // Only the parts that differ are named, and a long one is shortened.
+    let samples = |n: usize| (0..n).map(|i| format!("view{i:03}@4spp")).collect::<Vec<_>>().join(" ");
+    let (then, now) =
+        (format!("preparation 1, samples {}", samples(200)), format!("preparation 2, samples {}", samples(200)));
+    let bytes = encode_samples(&then, &synthetic(1)).unwrap();
+    let why = reason(&bytes, &now);
+    assert!(why.ends_with("other data or settings: preparation 1 then, preparation 2 now"), "{why}");
+    let why = reason(&bytes, &format!("preparation 1, samples {}", samples(201)));
+    assert!(why.contains("characters) then") && why.len() < 400, "{why}");
     let mut flipped = bytes.clone();
     flipped[bytes.len() / 2] ^= 0x10;
     assert!(reason(&flipped, KEY).contains("checksum"));
