@@ -893,6 +893,28 @@ fn train_starts_from_oidn_weights() {
         &[&["train", "--dataset", s(&ds), "--out", s(&dsnn), "--init", s(&oidn), "--features", "M_dsnn"][..], &common]
             .concat(),
     );
+    // `hush blend` at t = 0 is OIDN's weights: its output is OIDN's, bit for bit. Weights of other features
+    // are refused, naming both.
+    let blend = dir.join("blend.safetensors");
+    let model = run.join("model.safetensors");
+    expect_success(&["blend", "--from", "oidn", "--to", s(&model), "--t", "0", "--out", s(&blend)]);
+    assert!(denoise(&blend, "blend.exr") == theirs, "the blend at t = 0 does not denoise as OIDN's weights do");
+    let dsnn_model = dsnn.join("model.safetensors");
+    let err = expect_error(&["blend", "--from", s(&model), "--to", s(&dsnn_model), "--t", "0.5", "--out", s(&blend)]);
+    assert!(err.contains("different models") && err.contains("diff,spec,nrm"), "{err}");
+    // `hush eval --scenes` evaluates the named scenes' views of either split; an unknown scene lists the known.
+    let out = dir.join("eval-scenes");
+    let common_eval = ["eval", "--dataset", s(&ds), "--model", s(&blend), "--spp", "4", "--timing-runs", "1"];
+    expect_success(&[&common_eval[..], &["--scenes", "cbox", "--out", s(&out)]].concat());
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let mut views: Vec<&str> = summary["rows"].as_array().unwrap().iter().filter_map(|r| r["view"].as_str()).collect();
+    views.sort_unstable();
+    views.dedup();
+    assert_eq!(views, ["cbox_v000", "cbox_v001", "cbox_v002"], "the training views and the test view");
+    let err = expect_error(&[&common_eval[..], &["--scenes", "attic", "--out", s(&out)]].concat());
+    assert!(err.contains("--scenes attic") && err.contains("it has cbox"), "{err}");
+
     let err = expect_error(&[
         "train",
         "--dataset",

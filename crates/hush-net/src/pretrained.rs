@@ -26,7 +26,7 @@ use crate::net::NetConfig;
 use crate::transfer::Transfer;
 use crate::tza::{infer_config, oidn_features, parse_tza};
 use crate::unet::UNetConfig;
-use crate::weights::{ModelInfo, read_metadata};
+use crate::weights::{ModelInfo, read_metadata, serialize_weights};
 
 /// A trained network's tensors by name and what it is ([`ModelInfo`]).
 #[derive(Clone, Debug)]
@@ -137,6 +137,48 @@ impl Pretrained {
         Ok(Pretrained { info, tensors })
     }
 
+    /// The weights `(1 − t)·self + t·to`, tensor by tensor: interpolation in weight space between a network and
+    /// one fine-tuned from it (Wortsman et al. 2022, "Robust fine-tuning of zero-shot models": WiSE-FT). `t = 0`
+    /// is `self`, `t = 1` is `to`; in between, a model that keeps more of what `self` knew about inputs unlike
+    /// the fine-tuning data. Both must be the same network taking the same features through the same
+    /// transfer, with the same tensors by name and shape; an error names the first difference.
+    pub fn interpolate(&self, to: &Pretrained, t: f64) -> Result<Pretrained> {
+        if !t.is_finite() {
+            bail!("the interpolation weight is {t}, not a finite number")
+        }
+        if self.info != to.info {
+            bail!(
+                "the two weights are different models: {} on {} against {} on {}",
+                self.info.net.describe(),
+                self.info.features,
+                to.info.net.describe(),
+                to.info.features
+            )
+        }
+        let theirs: HashMap<&str, &Tensor> = to.tensors.iter().map(|(n, t)| (n.as_str(), t)).collect();
+        if let Some((name, _)) = to.tensors.iter().find(|(n, _)| !self.tensors.iter().any(|(m, _)| m == n)) {
+            bail!("the second weights hold {name}, which the first do not")
+        }
+        let tensors = self
+            .tensors
+            .iter()
+            .map(|(name, a)| {
+                let Some(b) = theirs.get(name.as_str()) else { bail!("the second weights have no tensor {name}") };
+                if a.dims() != b.dims() {
+                    bail!("{name} is {:?} in the first weights but {:?} in the second", a.dims(), b.dims())
+                }
+                let (a32, b32) = (a.to_dtype(DType::F32)?, b.to_dtype(DType::F32)?.to_device(a.device())?);
+                Ok((name.clone(), (&a32 + ((&b32 - &a32)? * t)?)?))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Pretrained { info: self.info.clone(), tensors })
+    }
+
+    /// These weights as a self-describing hush model file (what `hush train` writes as `model.safetensors`).
+    pub fn to_safetensors(&self) -> Result<Vec<u8>> {
+        serialize_weights(self.tensors.iter().map(|(n, t)| (n.as_str(), t)), &self.info)
+    }
+
     /// Sets every variable of `varmap` (a network built for `self.info.net`) from these weights. Fails
     /// naming the first variable (in name order) that is missing here or has another shape, or the first
     /// tensor here the network does not have.
@@ -220,6 +262,41 @@ mod tests {
         let (other, _) = model("alb,nrm", 0.5, 1);
         let err = pre.load_into(&other).unwrap_err().to_string();
         assert!(err.contains("dec_conv0.weight is [3, 8, 3, 3] in the initial weights"), "{err}");
+    }
+
+    /// Interpolation: t = 0 is the first weights bit for bit, t = 1 the second (to rounding), t = 0.5 their
+    /// mean; the file it writes reads back as the same model; different networks or features are refused.
+    #[test]
+    fn interpolation_runs_between_two_weights_of_one_network() {
+        let (a, info) = model("alb,nrm", 0.25, 3);
+        let (b, _) = model("alb,nrm", 0.25, 4);
+        let read = |v: &VarMap| Pretrained::read(&save_weights(v, &info).unwrap(), &Device::Cpu).unwrap();
+        let (pa, pb) = (read(&a), read(&b));
+        let values = |p: &Pretrained| -> Vec<Vec<f32>> {
+            p.tensors.iter().map(|(_, t)| t.flatten_all().unwrap().to_vec1().unwrap()).collect()
+        };
+        assert_eq!(values(&pa.interpolate(&pb, 0.0).unwrap()), values(&pa));
+        for (x, y) in values(&pa.interpolate(&pb, 1.0).unwrap()).iter().flatten().zip(values(&pb).iter().flatten()) {
+            assert!((x - y).abs() <= 1e-6 * y.abs().max(1.0), "{x} against {y}");
+        }
+        let half = pa.interpolate(&pb, 0.5).unwrap();
+        for ((m, x), y) in
+            values(&half).iter().flatten().zip(values(&pa).iter().flatten()).zip(values(&pb).iter().flatten())
+        {
+            assert!((m - (x + y) / 2.0).abs() <= 1e-6, "{m} is not the mean of {x} and {y}");
+        }
+        let back = Pretrained::read(&half.to_safetensors().unwrap(), &Device::Cpu).unwrap();
+        assert_eq!(back.info, half.info);
+        assert_eq!(values(&back), values(&half));
+
+        let (wide, wide_info) = model("alb,nrm", 0.5, 4);
+        let pw = Pretrained::read(&save_weights(&wide, &wide_info).unwrap(), &Device::Cpu).unwrap();
+        let err = pa.interpolate(&pw, 0.5).unwrap_err().to_string();
+        assert!(err.contains("different models"), "{err}");
+        let (other, other_info) = model("alb", 0.25, 4);
+        let po = Pretrained::read(&save_weights(&other, &other_info).unwrap(), &Device::Cpu).unwrap();
+        assert!(pa.interpolate(&po, 0.5).unwrap_err().to_string().contains("different models"));
+        assert!(pa.interpolate(&pb, f64::NAN).unwrap_err().to_string().contains("not a finite number"));
     }
 
     /// `diffuse` starts from the source's albedo weights, `specular` from zero.

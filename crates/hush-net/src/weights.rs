@@ -74,14 +74,17 @@ impl View for F32View {
 /// Serializes every variable of `varmap` as f32, with `info` as metadata. Tensor names are the VarMap's
 /// (`enc_conv0.weight`, ...).
 pub fn save_weights(varmap: &VarMap, info: &ModelInfo) -> Result<Vec<u8>> {
+    let vars = varmap.data().lock().map_err(|_| candle_core::Error::Msg("VarMap lock poisoned".into()))?;
+    serialize_weights(vars.iter().map(|(name, var)| (name.as_str(), var.as_tensor())), info)
+}
+
+/// Serializes named tensors as f32 in name order, with `info` as metadata.
+pub(crate) fn serialize_weights<'a>(
+    tensors: impl Iterator<Item = (&'a str, &'a Tensor)>,
+    info: &ModelInfo,
+) -> Result<Vec<u8>> {
     info.validate()?;
-    let mut views = Vec::new();
-    {
-        let vars = varmap.data().lock().map_err(|_| candle_core::Error::Msg("VarMap lock poisoned".into()))?;
-        for (name, var) in vars.iter() {
-            views.push((name.clone(), F32View::of(var.as_tensor())?));
-        }
-    }
+    let mut views = tensors.map(|(name, t)| Ok((name.to_string(), F32View::of(t)?))).collect::<Result<Vec<_>>>()?;
     views.sort_by(|a, b| a.0.cmp(&b.0));
     let json = serde_json::to_string(info).map_err(|e| candle_core::Error::Msg(format!("ModelInfo to JSON: {e}")))?;
     let metadata = HashMap::from([(METADATA_KEY.to_string(), json)]);

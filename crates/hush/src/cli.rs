@@ -38,6 +38,8 @@ pub enum Command {
     Denoise(DenoiseArgs),
     /// Write a trained U-Net as OIDN's Tensor Archive (.tza), which OIDN's own runtime runs.
     Export(crate::export_cmd::ExportArgs),
+    /// Interpolate in weight space between a network and one fine-tuned from it (WiSE-FT).
+    Blend(crate::blend_cmd::BlendArgs),
     /// Evaluate models and baselines against the noisy input on a dataset's test split: metrics, error
     /// against run time, pictures and a report.
     Eval(EvalArgs),
@@ -199,6 +201,10 @@ pub struct EvalArgs {
     /// feature set among the models.
     #[arg(long)]
     pub no_official: bool,
+    /// Evaluate every view of these scenes (either split) instead of the test split: the validation scenes
+    /// of `hush train --validation`, to choose among models without looking at the test scenes.
+    #[arg(long, value_delimiter = ',')]
+    pub scenes: Vec<String>,
 }
 
 impl EvalArgs {
@@ -212,6 +218,7 @@ impl EvalArgs {
             timing_runs: self.timing_runs,
             aux: self.aux,
             official: !self.no_official,
+            scenes: self.scenes,
         }
     }
 }

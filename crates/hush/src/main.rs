@@ -2,6 +2,7 @@
 //! hush-pipeline: each `*_cmd.rs` turns its arguments into a plan, runs it and prints what it did.
 
 mod bench_cmd;
+mod blend_cmd;
 mod cli;
 mod dataset_cmd;
 mod denoise_cmd;
@@ -48,6 +49,7 @@ fn main() {
         cli::Command::Train(args) => train_cmd::run(args),
         cli::Command::Denoise(args) => denoise_cmd::run(args),
         cli::Command::Export(args) => export_cmd::run(args),
+        cli::Command::Blend(args) => blend_cmd::run(args),
         cli::Command::Eval(args) => eval_cmd::run(args),
         cli::Command::Bench(args) => bench_cmd::run(args),
         cli::Command::SweepReport(args) => report_cmd::run(args),

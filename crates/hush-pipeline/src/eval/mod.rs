@@ -44,6 +44,10 @@ pub struct EvalPlan {
     /// Also evaluate OIDN's official weights (built in, run by hush) for each feature set among the models
     /// (color + albedo + normal without models): the generic model every hush model must beat.
     pub official: bool,
+    /// Evaluate the views of these scenes, of either split, instead of the test split: training scenes held
+    /// out of training as a validation split (`hush train --validation`) choose among models without the test
+    /// scenes seeing the choice. Empty: the test split.
+    pub scenes: Vec<String>,
 }
 
 impl EvalPlan {
@@ -60,18 +64,37 @@ impl EvalPlan {
             timing_runs: Self::DEFAULT_TIMING_RUNS,
             aux: AuxSource::default(),
             official: true,
+            scenes: Vec::new(),
         }
     }
+}
+
+/// The views `plan` evaluates: the test split, or every view of `plan.scenes` (an unknown scene is an error
+/// listing the dataset's scenes).
+fn evaluated_views(manifest: &Manifest, plan: &EvalPlan) -> Result<Vec<hush_dataset::ViewRecord>> {
+    if plan.scenes.is_empty() {
+        let views: Vec<_> = manifest.split(Split::Test).cloned().collect();
+        if views.is_empty() {
+            bail!("{} has no test views: render the dataset with --test-views 1 or more", plan.dataset.display());
+        }
+        return Ok(views);
+    }
+    for name in &plan.scenes {
+        if !manifest.views.iter().any(|v| &v.scene == name) {
+            let mut scenes: Vec<&str> = manifest.views.iter().map(|v| v.scene.as_str()).collect();
+            scenes.sort_unstable();
+            scenes.dedup();
+            bail!("--scenes {name}: {} has no such scene; it has {}", plan.dataset.display(), scenes.join(", "));
+        }
+    }
+    Ok(manifest.views.iter().filter(|v| plan.scenes.contains(&v.scene)).cloned().collect())
 }
 
 /// Evaluates the methods `plan` asks for on the test split of its dataset and writes the report into
 /// `plan.out`; returns the report.
 pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
     let manifest = Manifest::load(&plan.dataset)?;
-    let views: Vec<_> = manifest.split(Split::Test).cloned().collect();
-    if views.is_empty() {
-        bail!("{} has no test views: render the dataset with --test-views 1 or more", plan.dataset.display());
-    }
+    let views = evaluated_views(&manifest, plan)?;
     let mut report = Report::default();
     let mut methods: Vec<Box<dyn Method>> = vec![Box::new(Noisy)];
     let mut sets: Vec<hush_net::InputFeatures> = Vec::new();
@@ -125,8 +148,13 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
     report.notes.insert(
         0,
         format!(
-            "Dataset: {}; test views: {}; auxiliary inputs: {} (`--aux {}`).",
+            "Dataset: {}; {}: {}; auxiliary inputs: {} (`--aux {}`).",
             hush_eval::shown_path(&plan.dataset),
+            if plan.scenes.is_empty() {
+                "test views".to_string()
+            } else {
+                format!("views of the scenes {} (chosen by `--scenes`, not the test split)", plan.scenes.join(", "))
+            },
             views.len(),
             plan.aux.describe(),
             plan.aux

@@ -2,6 +2,7 @@
 //! prepared (and cached beside the dataset), hush-train's loop, and every epoch's logs and checkpoints
 //! written so that a killed run resumes bit-identically.
 
+mod blend;
 mod folder;
 mod options;
 mod samples;
@@ -12,6 +13,7 @@ use anyhow::{Context, Result, bail};
 use hush_dataset::{Manifest, Split};
 use hush_train::{Start, TrainError, read_train_state, train};
 
+pub use blend::blend;
 pub use folder::{RunFolder, incompatibilities};
 pub use options::{
     DEFAULT_DEVICE, DEFAULT_FEATURES, DEFAULT_FINETUNE_LR, DEFAULT_WIDTH, INIT_OIDN, RunConfig, TrainOptions, defaults,
