@@ -902,6 +902,9 @@ fn train_starts_from_oidn_weights() {
     let dsnn_model = dsnn.join("model.safetensors");
     let err = expect_error(&["blend", "--from", s(&model), "--to", s(&dsnn_model), "--t", "0.5", "--out", s(&blend)]);
     assert!(err.contains("different models") && err.contains("diff,spec,nrm"), "{err}");
+    let missing = dir.join("missing.tza");
+    let err = expect_error(&["blend", "--from", s(&missing), "--to", s(&model), "--t", "0.5", "--out", s(&blend)]);
+    assert!(err.contains("reading --from") && err.contains("missing.tza: no such file"), "{err}");
     // `hush eval --scenes` evaluates the named scenes' views of either split; an unknown scene lists the known.
     let out = dir.join("eval-scenes");
     let common_eval = ["eval", "--dataset", s(&ds), "--model", s(&blend), "--spp", "4", "--timing-runs", "1"];

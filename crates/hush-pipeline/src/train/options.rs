@@ -274,24 +274,33 @@ pub const INIT_OIDN: &str = "oidn";
 /// Reads the trained weights of `--init` and their record: a file, or [`INIT_OIDN`] for OIDN's official
 /// weights of `features` (those with albedo and normal when OIDN has none of exactly these features).
 pub fn read_init(init: &Path, features: Option<&InputFeatures>) -> Result<(Pretrained, InitRecord)> {
+    read_trained(init, features, "--init")
+}
+
+/// [`read_init`] for any option that names trained weights (`flag`, which its errors name).
+pub(crate) fn read_trained(
+    init: &Path,
+    features: Option<&InputFeatures>,
+    flag: &str,
+) -> Result<(Pretrained, InitRecord)> {
     let (name, bytes) = match init.to_str().and_then(|s| s.strip_prefix(INIT_OIDN)) {
         Some(rest) if rest.is_empty() || rest.starts_with('-') => {
             let official = match rest.strip_prefix(&format!("-{}", crate::official::OIDN_VERSION)) {
                 Some(name) if !name.is_empty() => crate::official::official(name.trim_start_matches(' '))
-                    .with_context(|| format!("--init {}: no such official OIDN weights", init.display()))?,
+                    .with_context(|| format!("{flag} {}: no such official OIDN weights", init.display()))?,
                 _ => crate::official::official_for(features.unwrap_or(&parse_features(DEFAULT_FEATURES)?)),
             };
             (official.method_name(), std::borrow::Cow::Borrowed(official.bytes))
         }
         _ => {
             let bytes = crate::read_weight_file(init).with_context(|| {
-                format!("reading --init {} (a .tza or .safetensors file, or `{INIT_OIDN}`)", init.display())
+                format!("reading {flag} {} (a .tza or .safetensors file, or `{INIT_OIDN}`)", init.display())
             })?;
             (init.display().to_string(), std::borrow::Cow::Owned(bytes))
         }
     };
     let weights = Pretrained::read(&bytes, &candle_core::Device::Cpu)
-        .with_context(|| format!("--init {name}: not weights hush can start from"))?;
+        .with_context(|| format!("{flag} {name}: not weights hush can read"))?;
     let record = InitRecord::of(name, &bytes, weights.info.features.clone());
     Ok((weights, record))
 }
