@@ -167,17 +167,16 @@ pub fn run(args: &[String]) -> Result<()> {
         }
         let validation_dir = dir.join(format!("validation-{}", model.name));
         spawn(eval_command(&hush, &dataset, &blends, &validation_dir).args(["--scenes", &VALIDATION.join(",")]))?;
-        let mut chosen: Option<(f64, f64)> = None;
-        let mut validation = Vec::new();
-        for t in BLEND {
-            let method = format!("{}/{}", model.name, blend_stem(t));
-            let gain = mean_gain(&held_out_rows(&validation_dir, &method, &oidn_method)?);
-            validation.push((t, gain));
-            if chosen.is_none_or(|(_, best)| gain > best) {
-                chosen = Some((t, gain));
-            }
-        }
-        let (t, _) = chosen.ok_or("BLEND is empty")?;
+        let validation = BLEND
+            .iter()
+            .map(|&t| {
+                let method = format!("{}/{}", model.name, blend_stem(t));
+                Ok((t, mean_gain(&held_out_rows(&validation_dir, &method, &oidn_method)?)))
+            })
+            .collect::<Result<Vec<(f64, f64)>>>()?;
+        // The first of the highest gains.
+        let (t, _) =
+            validation.iter().copied().reduce(|best, c| if c.1 > best.1 { c } else { best }).ok_or("BLEND is empty")?;
         let trained = run_dir.join(blend_file(t));
         let eval_dir = dir.join(format!("eval-{}", model.name));
         spawn(&mut eval_command(&hush, &dataset, std::slice::from_ref(&trained), &eval_dir))?;
@@ -366,7 +365,7 @@ fn summary_line(cases: &[Case]) -> String {
 /// What the card says of the run beyond the table: its training scenes, its validation losses.
 struct RunFacts {
     train_scenes: Vec<String>,
-    /// The validation loss of OIDN's weights before any step, and of the shipped (best) checkpoint at its epoch.
+    /// The validation loss of OIDN's weights before any step, and the lowest the run reached, with its epoch.
     initial_loss: Option<f64>,
     best: Option<(u64, f64)>,
     /// The interpolation weight the validation scenes chose.
