@@ -117,7 +117,8 @@ pub struct ReferenceCheck {
 }
 
 /// The reference: rendered at `supersample`× the width and height with `spp` samples per (sub)pixel,
-/// firefly-filtered at that resolution, then box-downsampled.
+/// firefly-filtered at that resolution, then box-downsampled. A film whose pixel filter is not a box
+/// is rendered at 1× (`supersample` 1) with the same paths per pixel: downsampling would narrow its filter.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ReferenceRecord {
     /// Samples per subpixel; every final pixel averages `spp × supersample²` paths.

@@ -55,7 +55,8 @@ pub struct DatasetArgs {
     /// needs cleaner references than training on them does.
     #[arg(long)]
     pub test_ref_spp: Option<u32>,
-    /// The reference is rendered at this many times the width and height, then box-downsampled.
+    /// The reference is rendered at this many times the width and height, then box-downsampled (a film
+    /// with a tent or Gaussian filter: at 1× with this factor² times the samples, which keeps its filter).
     #[arg(long, default_value_t = DatasetPlan::DEFAULT_REF_SUPERSAMPLE)]
     pub ref_supersample: u32,
     /// Firefly filter of the reference: a pixel brighter than this many times its brightest neighbour is

@@ -47,7 +47,8 @@ pub struct DatasetPlan {
     pub ref_spp: u32,
     /// Samples per (sub)pixel of the test split's references (`None`: `ref_spp`).
     pub test_ref_spp: Option<u32>,
-    /// The reference is rendered at this many times the width and height, then box-downsampled.
+    /// The reference is rendered at this many times the width and height, then box-downsampled (a film
+    /// with a tent or Gaussian filter: at 1× with this factor² times the samples, which keeps its filter).
     pub ref_supersample: u32,
     /// A reference pixel brighter than this many times its brightest neighbour is clamped; 0 is off.
     pub firefly_factor: f32,

@@ -11,7 +11,7 @@ use hush_dataset::{
     ReferenceCheck, ReferenceRecord, RenderRecord, Split, ViewGeneration, check_image, despeckle, read_rgb, write_rgb,
 };
 use hush_hash::SplitMix64;
-use hush_scene::{Camera, Scene};
+use hush_scene::{Camera, PixelFilter, Scene};
 use hush_trace::{RenderOutput, RenderSettings, Renderer};
 
 use super::DatasetPlan;
@@ -28,6 +28,18 @@ pub fn render_seed(seed: u64, scene: &str, view: u32, what: &str) -> u64 {
         acc = SplitMix64(acc ^ b as u64).next_u64();
     }
     SplitMix64(acc ^ view as u64).next_u64()
+}
+
+/// How a reference is rendered: samples per subpixel and the supersampling factor. Box-downsampling
+/// an `ss`× render is the same box filter at 1×, but not the same tent or Gaussian: those would keep
+/// their radius in subpixels and end narrower than the noisy images' filter (a sharper reference that
+/// no number of samples brings a noisy render to). A film with such a filter gets its reference at
+/// 1× with the same paths per pixel, `spp × ss²`.
+pub fn reference_sampling(spp: u32, ss: u32, filter: PixelFilter) -> (u32, u32) {
+    match filter {
+        PixelFilter::Box => (spp, ss),
+        PixelFilter::Tent { .. } | PixelFilter::Gaussian { .. } => (spp.saturating_mul(ss * ss), 1),
+    }
 }
 
 /// A candidate camera: it orbits the scene camera's target by up to ±20° of yaw and ±8° of pitch, moves
@@ -264,13 +276,13 @@ pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u3
     ctx.record(&progress)?;
     ctx.advance();
 
-    let ref_spp = plan.ref_spp_of(split);
+    let (ref_spp, ss) = reference_sampling(plan.ref_spp_of(split), plan.ref_supersample, scene.film.filter);
     let ref_file = Layout::reference_name(name, &view);
     let ref_seed = render_seed(plan.seed, name, v, "reference");
     let kept = previous.as_ref().and_then(|p| p.reference.clone()).filter(|r| {
         r.spp == ref_spp
             && r.seed == ref_seed
-            && r.supersample == plan.ref_supersample
+            && r.supersample == ss
             && r.firefly.factor == plan.firefly_factor
             && r.file == ref_file
             && ctx.valid(&ref_file, &camera)
@@ -278,7 +290,6 @@ pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u3
     let (mut reference, mut reference_image) = match kept {
         Some(r) => (r, None),
         None => {
-            let ss = plan.ref_supersample;
             let mut big = scene.clone();
             big.film.width *= ss;
             big.film.height *= ss;
