@@ -155,18 +155,14 @@ impl Pretrained {
                 to.info.features
             )
         }
-        let theirs: HashMap<&str, &Tensor> = to.tensors.iter().map(|(n, t)| (n.as_str(), t)).collect();
-        if let Some((name, _)) = to.tensors.iter().find(|(n, _)| !self.tensors.iter().any(|(m, _)| m == n)) {
-            bail!("the second weights hold {name}, which the first do not")
-        }
+        let have: HashMap<&str, &Tensor> = to.tensors.iter().map(|(n, t)| (n.as_str(), t)).collect();
+        let want: Vec<(&str, &[usize])> = self.tensors.iter().map(|(n, t)| (n.as_str(), t.dims())).collect();
+        let theirs = match_by_name(&want, &have, ("the second weights", "the first model"))?;
         let tensors = self
             .tensors
             .iter()
             .map(|(name, a)| {
-                let Some(b) = theirs.get(name.as_str()) else { bail!("the second weights have no tensor {name}") };
-                if a.dims() != b.dims() {
-                    bail!("{name} is {:?} in the first weights but {:?} in the second", a.dims(), b.dims())
-                }
+                let b = theirs[name.as_str()];
                 let (a32, b32) = (a.to_dtype(DType::F32)?, b.to_dtype(DType::F32)?.to_device(a.device())?);
                 Ok((name.clone(), (&a32 + ((&b32 - &a32)? * t)?)?))
             })
@@ -185,29 +181,41 @@ impl Pretrained {
     pub fn load_into(&self, varmap: &VarMap) -> Result<()> {
         let vars = varmap.data().lock().map_err(|_| candle_core::Error::Msg("VarMap lock poisoned".into()))?;
         let have: HashMap<&str, &Tensor> = self.tensors.iter().map(|(n, t)| (n.as_str(), t)).collect();
-        let mut names: Vec<&String> = vars.keys().collect();
-        names.sort();
-        for name in &names {
-            let var = &vars[*name];
-            match have.get(name.as_str()) {
-                None => bail!("the initial weights have no tensor {name}, which the network needs"),
-                Some(t) if t.dims() != var.dims() => {
-                    bail!("{name} is {:?} in the initial weights but {:?} in the network", t.dims(), var.dims())
-                }
-                Some(_) => {}
-            }
-        }
-        let mut extra: Vec<&str> = have.keys().copied().filter(|n| !vars.contains_key(*n)).collect();
-        extra.sort();
-        if let Some(first) = extra.first() {
-            bail!("the initial weights hold {first}, which the network does not have ({} such tensors)", extra.len())
-        }
-        for name in names {
-            let var = &vars[name];
-            var.set(&have[name.as_str()].to_device(var.device())?.to_dtype(var.dtype())?)?;
+        let want: Vec<(&str, &[usize])> = vars.iter().map(|(n, v)| (n.as_str(), v.dims())).collect();
+        let matched = match_by_name(&want, &have, ("the initial weights", "the network"))?;
+        for (name, var) in vars.iter() {
+            var.set(&matched[name.as_str()].to_device(var.device())?.to_dtype(var.dtype())?)?;
         }
         Ok(())
     }
+}
+
+/// Pairs every tensor `want` names (with its shape) with the one of that name in `have`. Fails naming the
+/// first (in name order) that `have` lacks or holds in another shape, then the first that `have` holds
+/// beyond `want`; `sides` names `have` and `want` in those messages.
+fn match_by_name<'a>(
+    want: &[(&str, &[usize])],
+    have: &HashMap<&str, &'a Tensor>,
+    (have_name, want_name): (&str, &str),
+) -> Result<HashMap<String, &'a Tensor>> {
+    let mut sorted: Vec<&(&str, &[usize])> = want.iter().collect();
+    sorted.sort_by_key(|(name, _)| *name);
+    let mut matched = HashMap::new();
+    for &&(name, dims) in &sorted {
+        match have.get(name) {
+            None => bail!("{have_name} have no tensor {name}, which {want_name} needs"),
+            Some(t) if t.dims() != dims => {
+                bail!("{name} is {:?} in {have_name} but {:?} in {want_name}", t.dims(), dims)
+            }
+            Some(t) => matched.insert(name.to_string(), *t),
+        };
+    }
+    let mut extra: Vec<&str> = have.keys().copied().filter(|n| !matched.contains_key(*n)).collect();
+    extra.sort();
+    if let Some(first) = extra.first() {
+        bail!("{have_name} hold {first}, which {want_name} does not have ({} such tensors)", extra.len())
+    }
+    Ok(matched)
 }
 
 #[cfg(test)]
