@@ -14,15 +14,19 @@
 //! smooth and thin dielectrics, area lights); [`Ingredients::ALL`] adds rough dielectrics, rough
 //! plastic, bitmap textures and environment emitters (`constant`, `envmap`).
 //!
-//! Every scene has a style drawn from its seed: `standard` (mixed materials and lights),
+//! Every room has a style drawn from its seed: `standard` (mixed materials and lights),
 //! `dark` (dark surfaces, one dim small light), `glass` (most objects glass) and `spotlit`
-//! (lit mostly by tiny, very bright lights, the source of fireflies).
+//! (lit mostly by tiny, very bright lights, the source of fireflies). [`GeneratorOptions::style`]
+//! can ask for one instead, or for `open`: no room, objects on a ground plane under a sky, sometimes
+//! with a small, very bright sun and bulbs in view.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 use hush_hash::SplitMix64;
+
+use crate::PixelFilter;
 
 /// Bumped whenever the same seed and options would give a different scene.
 pub const GENERATOR_VERSION: u32 = 3;
@@ -103,11 +107,32 @@ pub struct GeneratorOptions {
     /// may be placed as furniture, each copied beside the scene as an asset (`borrowed-<k>.obj`, its `mtllib`
     /// lines dropped). Ignored when the folder is absent.
     pub borrow_meshes: Option<PathBuf>,
+    /// The style every scene has; `None`: each room draws its own from its seed (standard, dark, glass or
+    /// spotlit). The seed's draw is made either way, so a room asked for in its own style is the room.
+    pub style: Option<Style>,
+    /// The film's pixel filter (rooms of the dataset: box, as OIDN's training data). Another filter
+    /// correlates the noise of neighbouring pixels, and turns a firefly into a blob of several pixels.
+    pub filter: PixelFilter,
+}
+
+impl GeneratorOptions {
+    /// Rooms of `ingredients` (their style drawn from each seed, a box filter) on a film of `width` ×
+    /// `height`, borrowing meshes from `borrow_meshes` if given.
+    pub fn rooms(ingredients: Ingredients, width: u32, height: u32, borrow_meshes: Option<PathBuf>) -> Self {
+        GeneratorOptions { ingredients, width, height, borrow_meshes, ..Default::default() }
+    }
 }
 
 impl Default for GeneratorOptions {
     fn default() -> Self {
-        GeneratorOptions { ingredients: Ingredients::KERNEL, width: 256, height: 256, borrow_meshes: None }
+        GeneratorOptions {
+            ingredients: Ingredients::KERNEL,
+            width: 256,
+            height: 256,
+            borrow_meshes: None,
+            style: None,
+            filter: PixelFilter::Box,
+        }
     }
 }
 
@@ -289,22 +314,41 @@ fn v3(v: Vec3) -> String {
     format!("{}, {}, {}", num(v.x), num(v.y), num(v.z))
 }
 
-#[derive(Clone, Copy, PartialEq, Eq)]
-enum Style {
+/// A scene's style. Rooms draw theirs from the seed ([`GeneratorOptions::style`] `None`); `Open` is only
+/// ever asked for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Style {
+    /// Mixed materials and lights.
     Standard,
+    /// Dark surfaces, one dim small light.
     Dark,
+    /// Most objects glass.
     Glass,
+    /// Lit mostly by tiny, very bright lights, the source of fireflies.
     Spotlit,
+    /// No room: objects on a ground plane under a sky (`constant` or `envmap`; an overcast panel high
+    /// above without the environment ingredient), sometimes with a small, very bright sun and bulbs in
+    /// view.
+    Open,
 }
 
 impl Style {
-    fn name(self) -> &'static str {
+    /// Every style, by name.
+    pub const ALL: [Style; 5] = [Style::Standard, Style::Dark, Style::Glass, Style::Spotlit, Style::Open];
+
+    pub fn name(self) -> &'static str {
         match self {
             Style::Standard => "standard",
             Style::Dark => "dark",
             Style::Glass => "glass",
             Style::Spotlit => "spotlit",
+            Style::Open => "open",
         }
+    }
+
+    /// The style named `name` ([`Style::name`]).
+    pub fn parse(name: &str) -> Option<Style> {
+        Style::ALL.into_iter().find(|s| s.name() == name)
     }
 }
 
@@ -344,12 +388,13 @@ struct Bsdf {
 impl<'a> Gen<'a> {
     fn new(seed: u64, options: &'a GeneratorOptions) -> Self {
         let mut rng = Rng(SplitMix64(seed));
-        let style = match rng.weighted(&[0.55, 0.15, 0.15, 0.15]) {
+        let drawn = match rng.weighted(&[0.55, 0.15, 0.15, 0.15]) {
             0 => Style::Standard,
             1 => Style::Dark,
             2 => Style::Glass,
             _ => Style::Spotlit,
         };
+        let style = options.style.unwrap_or(drawn);
         Gen {
             rng,
             seed,
@@ -370,6 +415,9 @@ impl<'a> Gen<'a> {
     }
 
     fn scene(&mut self) {
+        if self.style == Style::Open {
+            return self.open_scene();
+        }
         let r = &mut self.rng;
         self.room = Vec3::new(r.range(3.0, 9.0), r.range(2.4, 4.0), r.range(3.0, 9.0));
         let room = self.room;
@@ -414,10 +462,19 @@ impl<'a> Gen<'a> {
         );
         let _ =
             writeln!(head, "    <sampler type=\"independent\"><integer name=\"sample_count\" value=\"64\"/></sampler>");
+        let rfilter = match o.filter {
+            PixelFilter::Box => "<rfilter type=\"box\"/>".to_string(),
+            PixelFilter::Tent { radius } => {
+                format!("<rfilter type=\"tent\"><float name=\"radius\" value=\"{}\"/></rfilter>", num(radius))
+            }
+            PixelFilter::Gaussian { stddev } => {
+                format!("<rfilter type=\"gaussian\"><float name=\"stddev\" value=\"{}\"/></rfilter>", num(stddev))
+            }
+        };
         let _ = writeln!(
             head,
             "    <film type=\"hdrfilm\"><integer name=\"width\" value=\"{}\"/><integer name=\"height\" value=\"{}\"/>\
-             <rfilter type=\"box\"/></film>",
+             {rfilter}</film>",
             o.width.max(1),
             o.height.max(1)
         );
@@ -718,7 +775,7 @@ impl<'a> Gen<'a> {
             Style::Standard => (1 + self.rng.below(2), self.rng.below(3), self.rng.below(2)),
             Style::Glass => (1, self.rng.below(2), self.rng.below(3)),
             Style::Spotlit => (0, self.rng.below(2), 1 + self.rng.below(3)),
-            Style::Dark => (0, 1, 0),
+            Style::Dark | Style::Open => (0, 1, 0),
         };
         for _ in 0..large {
             let (hx, hz) = (self.rng.range(0.3, 1.0), self.rng.range(0.3, 1.0));
@@ -913,6 +970,77 @@ impl<'a> Gen<'a> {
         if !self.options.ingredients.environment || self.style == Style::Dark || !self.rng.chance(0.5) {
             return;
         }
+        self.sky();
+    }
+
+    /// Objects on a ground plane under a sky: the camera stands at the near edge of the patch they stand on
+    /// and looks across it, the horizon often in view.
+    fn open_scene(&mut self) {
+        let r = &mut self.rng;
+        self.room = Vec3::new(r.range(3.0, 7.0), 6.0, r.range(3.0, 7.0));
+        let room = self.room;
+        self.camera = Vec3::new(r.range(0.3, 0.7) * room.x, r.range(0.4, 2.5), r.range(-1.0, 0.3));
+        let target = Vec3::new(r.range(0.3, 0.7) * room.x, r.range(0.0, 0.7), r.range(0.4, 0.8) * room.z);
+        let fov = r.range(30.0, 60.0);
+        self.footprints.push(Footprint { x: self.camera.x, z: self.camera.z, r: 0.5 });
+        let ground = self.surface_material();
+        let centre = Vec3::new(room.x / 2.0, 0.0, room.z / 2.0);
+        self.rectangle("ground", centre, [Vec3::X * 60.0, Vec3::Z * 60.0], Vec3::Y, &ground, None);
+        if self.options.ingredients.environment {
+            self.sky();
+        } else {
+            let radiance = Vec3::new(0.8, 0.9, 1.0) * self.rng.range(1.0, 4.0);
+            let black = self.black();
+            let high = centre + Vec3::Y * 30.0;
+            self.rectangle("overcast", high, [Vec3::X * 40.0, Vec3::Z * 40.0], -Vec3::Y, &black, Some(radiance));
+            self.lights.push(LightKind::LargeArea);
+        }
+        // A sun: a small, very bright sphere far above (hard shadows, sharp highlights).
+        if self.rng.chance(0.5) {
+            let dir = Vec3::new(self.rng.range(-1.0, 1.0), self.rng.range(0.4, 1.5), self.rng.range(-0.5, 1.5));
+            let c = centre + dir.normalize() * 40.0;
+            let radius = self.rng.range(0.2, 0.8);
+            let radiance = Vec3::new(1.0, self.rng.range(0.85, 1.0), self.rng.range(0.7, 0.95))
+                * (self.rng.range(2000.0, 10000.0) * (0.5 / radius).powi(2));
+            let black = self.black();
+            let extra = format!(
+                "<point name=\"center\" value=\"{}\"/><float name=\"radius\" value=\"{}\"/>",
+                v3(c),
+                num(radius)
+            );
+            self.shape("sphere", "sun", "", &black, &extra, Some(radiance));
+            self.lights.push(LightKind::BrightSmall);
+        }
+        // Bulbs among the objects, sometimes: tiny and very bright, often in view or reflected.
+        for _ in 0..[0, 0, 1, 2][self.rng.below(4)] {
+            let rad = self.rng.range(0.02, 0.08);
+            let c = Vec3::new(
+                self.rng.range(0.1, 0.9) * room.x,
+                self.rng.range(0.3, 2.0),
+                self.rng.range(0.3, 1.0) * room.z,
+            );
+            let radiance =
+                Vec3::new(1.0, self.rng.range(0.75, 1.0), self.rng.range(0.5, 0.95)) * self.rng.range(300.0, 3000.0);
+            let black = self.black();
+            let extra =
+                format!("<point name=\"center\" value=\"{}\"/><float name=\"radius\" value=\"{}\"/>", v3(c), num(rad));
+            self.shape("sphere", "bulb", "", &black, &extra, Some(radiance));
+            self.lights.push(LightKind::BrightSmall);
+        }
+        let count = 3 + self.rng.below(6);
+        for _ in 0..count {
+            match self.rng.weighted(&[1.5, 1.0, 3.0, 1.5]) {
+                0 => self.a_box(0.0),
+                1 => self.table(0.0),
+                2 => self.a_sphere(0.0, None),
+                _ => self.a_cylinder(0.0),
+            }
+        }
+        self.write_header(target, fov);
+    }
+
+    /// A `constant` sky or a generated `envmap` sky with a sun spot.
+    fn sky(&mut self) {
         if self.rng.chance(0.4) {
             let radiance = Vec3::new(0.6, 0.75, 1.0) * self.rng.range(0.2, 2.0);
             self.environment = Some(format!(

@@ -106,7 +106,7 @@ pub struct GeneratorArgs {
 
 impl GeneratorArgs {
     pub fn options(&self, width: u32, height: u32) -> GeneratorOptions {
-        GeneratorOptions { ingredients: self.ingredients, width, height, borrow_meshes: self.borrow_meshes.clone() }
+        GeneratorOptions::rooms(self.ingredients, width, height, self.borrow_meshes.clone())
     }
 }
 

@@ -9,6 +9,8 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 use hush_dataset::write_atomic;
 use hush_pipeline::procedural::{generate_into, summary_json};
+use hush_scene::PixelFilter;
+use hush_scene::procedural::{GeneratorOptions, Style};
 use hush_trace::Renderer;
 
 use crate::cli::GeneratorArgs;
@@ -51,6 +53,29 @@ pub struct GenerateArgs {
     /// Write the scene without the GPU probe that rejects a camera seeing nothing lit.
     #[arg(long)]
     pub no_probe: bool,
+    /// The scene's style: standard, dark, glass, spotlit (rooms, otherwise drawn from the seed) or open
+    /// (objects on a ground plane under a sky).
+    #[arg(long, value_parser = parse_style)]
+    pub style: Option<Style>,
+    /// The film's pixel filter: box, tent (radius 1) or gaussian (σ 0.5), as Mitsuba's.
+    #[arg(long, default_value = "box", value_parser = parse_filter)]
+    pub filter: PixelFilter,
+}
+
+fn parse_filter(name: &str) -> Result<PixelFilter, String> {
+    match name {
+        "box" => Ok(PixelFilter::Box),
+        "tent" => Ok(PixelFilter::Tent { radius: 1.0 }),
+        "gaussian" => Ok(PixelFilter::MITSUBA_DEFAULT),
+        other => Err(format!("unknown pixel filter '{other}': use box, tent or gaussian")),
+    }
+}
+
+fn parse_style(name: &str) -> Result<Style, String> {
+    Style::parse(name).ok_or_else(|| {
+        let names: Vec<_> = Style::ALL.iter().map(|s| s.name()).collect();
+        format!("unknown style '{name}': use {}", names.join(", "))
+    })
 }
 
 pub fn run(args: SceneArgs) -> Result<()> {
@@ -85,7 +110,7 @@ fn generate(args: GenerateArgs) -> Result<()> {
     if args.out.extension().is_none_or(|e| !e.eq_ignore_ascii_case("xml")) {
         bail!("--out {}: the scene is Mitsuba XML; name the file *.xml", args.out.display());
     }
-    let options = args.generator.options(256, 256);
+    let options = GeneratorOptions { style: args.style, filter: args.filter, ..args.generator.options(256, 256) };
     let gpu = if args.no_probe { None } else { Some(crate::open_gpu()?) };
     let renderer = gpu.as_ref().map(Renderer::new).transpose()?;
     let written = generate_into(&args.out, args.seed, 0, &options, renderer.as_ref())?;

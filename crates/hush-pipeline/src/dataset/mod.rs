@@ -101,7 +101,7 @@ impl DatasetPlan {
 
     /// The generator's options for scenes of `width` × `height`.
     pub fn generator_options(&self, width: u32, height: u32) -> GeneratorOptions {
-        GeneratorOptions { ingredients: self.ingredients, width, height, borrow_meshes: self.borrow_meshes.clone() }
+        GeneratorOptions::rooms(self.ingredients, width, height, self.borrow_meshes.clone())
     }
 
     /// The spp ladder, sorted, without repeats.
