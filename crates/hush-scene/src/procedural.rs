@@ -775,7 +775,9 @@ impl<'a> Gen<'a> {
             Style::Standard => (1 + self.rng.below(2), self.rng.below(3), self.rng.below(2)),
             Style::Glass => (1, self.rng.below(2), self.rng.below(3)),
             Style::Spotlit => (0, self.rng.below(2), 1 + self.rng.below(3)),
-            Style::Dark | Style::Open => (0, 1, 0),
+            Style::Dark => (0, 1, 0),
+            // Open scenes have no room: `open_scene` lights them.
+            Style::Open => (0, 0, 0),
         };
         for _ in 0..large {
             let (hx, hz) = (self.rng.range(0.3, 1.0), self.rng.range(0.3, 1.0));
@@ -814,12 +816,17 @@ impl<'a> Gen<'a> {
                 self.rng.range(0.4, 0.9) * room.z,
             );
             let radiance = warm(&mut self.rng) * self.rng.range(300.0, 3000.0);
-            let black = self.black();
-            let extra =
-                format!("<point name=\"center\" value=\"{}\"/><float name=\"radius\" value=\"{}\"/>", v3(c), num(r));
-            self.shape("sphere", "bulb", "", &black, &extra, Some(radiance));
-            self.lights.push(LightKind::BrightSmall);
+            self.bright_sphere("bulb", c, r, radiance);
         }
+    }
+
+    /// A small sphere of very high radiance (a bulb, a sun), black where it does not emit.
+    fn bright_sphere(&mut self, name: &str, c: Vec3, r: f32, radiance: Vec3) {
+        let black = self.black();
+        let extra =
+            format!("<point name=\"center\" value=\"{}\"/><float name=\"radius\" value=\"{}\"/>", v3(c), num(r));
+        self.shape("sphere", name, "", &black, &extra, Some(radiance));
+        self.lights.push(LightKind::BrightSmall);
     }
 
     /// Finds a free spot on the floor for an object of footprint radius `r`.
@@ -1002,14 +1009,7 @@ impl<'a> Gen<'a> {
             let radius = self.rng.range(0.2, 0.8);
             let radiance = Vec3::new(1.0, self.rng.range(0.85, 1.0), self.rng.range(0.7, 0.95))
                 * (self.rng.range(2000.0, 10000.0) * (0.5 / radius).powi(2));
-            let black = self.black();
-            let extra = format!(
-                "<point name=\"center\" value=\"{}\"/><float name=\"radius\" value=\"{}\"/>",
-                v3(c),
-                num(radius)
-            );
-            self.shape("sphere", "sun", "", &black, &extra, Some(radiance));
-            self.lights.push(LightKind::BrightSmall);
+            self.bright_sphere("sun", c, radius, radiance);
         }
         // Bulbs among the objects, sometimes: tiny and very bright, often in view or reflected.
         for _ in 0..[0, 0, 1, 2][self.rng.below(4)] {
@@ -1021,11 +1021,7 @@ impl<'a> Gen<'a> {
             );
             let radiance =
                 Vec3::new(1.0, self.rng.range(0.75, 1.0), self.rng.range(0.5, 0.95)) * self.rng.range(300.0, 3000.0);
-            let black = self.black();
-            let extra =
-                format!("<point name=\"center\" value=\"{}\"/><float name=\"radius\" value=\"{}\"/>", v3(c), num(rad));
-            self.shape("sphere", "bulb", "", &black, &extra, Some(radiance));
-            self.lights.push(LightKind::BrightSmall);
+            self.bright_sphere("bulb", c, rad, radiance);
         }
         let count = 3 + self.rng.below(6);
         for _ in 0..count {
