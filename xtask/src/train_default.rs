@@ -133,7 +133,7 @@ pub fn run(args: &[String]) -> Result<()> {
 
     let start = std::time::Instant::now();
     let open = open_scenes(&hush, &dir)?;
-    spawn(dataset_command(&hush, &root, &dataset).args(&open))?;
+    spawn(&mut dataset_command(&hush, &root, &open, &dataset))?;
     let dataset_seconds = start.elapsed().as_secs_f64();
     let manifest = std::fs::read(dataset.join("manifest.json"))
         .map_err(|e| format!("reading {}: {e}", dataset.join("manifest.json").display()))?;
@@ -257,10 +257,11 @@ fn open_scenes(hush: &Path, dir: &Path) -> Result<Vec<std::path::PathBuf>> {
     Ok(paths)
 }
 
-/// `hush dataset` of the shipped models' scenes (the open scenes are added by the caller).
-fn dataset_command(hush: &Path, root: &Path, dataset: &Path) -> Command {
+/// `hush dataset` of the shipped models' scenes: the bundled ones, the `open` scenes' files and the
+/// procedural rooms.
+fn dataset_command(hush: &Path, root: &Path, open: &[std::path::PathBuf], dataset: &Path) -> Command {
     let mut cmd = Command::new(hush);
-    cmd.arg("dataset").args(SCENES.iter().map(|s| root.join(s))).arg("--out").arg(dataset);
+    cmd.arg("dataset").args(SCENES.iter().map(|s| root.join(s))).args(open).arg("--out").arg(dataset);
     cmd.args(["--procedural", &PROCEDURAL.to_string(), "--test-scenes", &TEST_SCENES.join(",")]);
     cmd.args(DATASET_ARGS);
     cmd
