@@ -64,7 +64,7 @@ mod weights;
 pub use denoise::denoise;
 pub use direct::available as direct_conv_available;
 pub use input::{Feature, InputFeatures, build_inference_input, build_input, finish_color, prepare_color};
-pub use loss::Loss;
+pub use loss::{Loss, LossSpace};
 pub use net::{DenoiseNet, Net, NetConfig, PATCH_MLP_KIND};
 pub use patch_mlp::{Activation, BURGER_HIDDEN, BURGER_PATCH, BURGER_STRIDE, PatchMlp, PatchMlpConfig};
 pub use pretrained::Pretrained;

@@ -32,6 +32,8 @@
 use candle_core::{CpuStorage, CustomOp1, DType, Layout, Result, Shape, Tensor, bail};
 use serde::{Deserialize, Serialize};
 
+use crate::transfer::{Transfer, display_tensor};
+
 /// Side of the Gaussian window.
 pub const SSIM_WINDOW: usize = 11;
 /// Standard deviation of the Gaussian window, in pixels.
@@ -111,6 +113,58 @@ impl Loss {
             "msssim" | "ms-ssim" => Some(Loss::MsSsim),
             "l1_msssim" => Some(Loss::Mix),
             _ => Loss::ALL.into_iter().find(|l| l.name() == name),
+        }
+    }
+}
+
+/// Where a training loss compares the network's output with its target.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LossSpace {
+    /// As the network sees them, in its transfer function's space (PU for HDR color): OIDN's choice.
+    #[default]
+    Transfer,
+    /// Back through the transfer function to exposed linear values, then OIDN's evaluation transform
+    /// ([`crate::transfer::display_tensor`]: filmic curve and sRGB): where hush's metrics and OIDN's
+    /// `compare_image.py` measure. With the samples' exposure (the reference's autoexposure, which the
+    /// metrics use too), MSE here on a whole image is the MSE behind its PSNR.
+    Tonemapped,
+}
+
+impl LossSpace {
+    pub const ALL: [LossSpace; 2] = [LossSpace::Transfer, LossSpace::Tonemapped];
+
+    /// The serialized name (`transfer`, `tonemapped`).
+    pub fn name(self) -> &'static str {
+        match self {
+            LossSpace::Transfer => "transfer",
+            LossSpace::Tonemapped => "tonemapped",
+        }
+    }
+
+    /// The default, which configurations written before loss spaces existed mean.
+    pub fn is_transfer(&self) -> bool {
+        *self == LossSpace::Transfer
+    }
+
+    pub fn parse(name: &str) -> Option<LossSpace> {
+        LossSpace::ALL.into_iter().find(|s| s.name() == name)
+    }
+
+    /// `x` (what the network sees or predicts, after `transfer`) in this space. Values above 1, which no
+    /// target reaches (the transfer functions map [`crate::transfer::HDR_Y_MAX`] to 1), count as 1.
+    pub fn map(self, transfer: Transfer, x: &Tensor) -> Result<Tensor> {
+        match self {
+            LossSpace::Transfer => Ok(x.clone()),
+            LossSpace::Tonemapped => display_tensor(&transfer.inverse_tensor(&x.minimum(1.0)?)?),
+        }
+    }
+
+    /// `loss` of prediction `x` against target `y` (both after `transfer`, NCHW) in this space.
+    pub fn compute(self, loss: Loss, transfer: Transfer, x: &Tensor, y: &Tensor) -> Result<Tensor> {
+        match self {
+            LossSpace::Transfer => loss.compute(x, y),
+            LossSpace::Tonemapped => loss.compute(&self.map(transfer, x)?, &self.map(transfer, y)?),
         }
     }
 }

@@ -135,6 +135,72 @@ pub fn srgb_inverse(x: f32) -> f32 {
     (if x <= SRGB_X0 { x / SRGB_A } else { ((x - SRGB_D) / SRGB_B).powf(1.0 / SRGB_C) }) as f32
 }
 
+// Hable's "Uncharted 2" filmic curve with OIDN's constants, from Open Image Denoise's training toolkit,
+// `training/color.py` (`tonemap`, RenderKit/oidn commit 951c537): [Hable, 2010, "Uncharted 2: HDR Lighting"].
+const HABLE_A: f64 = 0.22; // shoulder strength
+const HABLE_B: f64 = 0.30; // linear strength
+const HABLE_C: f64 = 0.10; // linear angle
+const HABLE_D: f64 = 0.20; // toe strength
+const HABLE_E: f64 = 0.01; // toe numerator
+const HABLE_F: f64 = 0.30; // toe denominator
+const FILMIC_WHITE: f64 = 11.2; // linear white point: maps to 1
+const FILMIC_SCALE: f64 = 1.758141; // "exposure bias to match 18% middle gray"
+
+fn hable(x: f64) -> f64 {
+    ((x * (HABLE_A * x + HABLE_C * HABLE_B) + HABLE_D * HABLE_E) / (x * (HABLE_A * x + HABLE_B) + HABLE_D * HABLE_F))
+        - HABLE_E / HABLE_F
+}
+
+/// OIDN's filmic curve on one linear value (already multiplied by the exposure):
+/// `min(1, hable(1.758141·x) / hable(11.2))`, in [0, 1].
+///
+/// Like OIDN's toolkit, which replaces NaN by 0 and clamps HDR color to ≥ 0 when it loads an image
+/// (`training/image.py` `load_image`, `training/dataset.py` `load_image_features`), NaN and negative values
+/// map to 0; +Inf maps to 1. Computed in f64 so that huge finite values saturate instead of overflowing.
+pub fn filmic(x: f32) -> f32 {
+    filmic_f64(x) as f32
+}
+
+fn filmic_f64(x: f32) -> f64 {
+    if x.is_nan() || x <= 0.0 {
+        return 0.0;
+    }
+    if x.is_infinite() {
+        return 1.0;
+    }
+    (hable(f64::from(x) * FILMIC_SCALE) / hable(FILMIC_WHITE)).clamp(0.0, 1.0)
+}
+
+/// sRGB encoding (IEC 61966-2-1, the constants of OIDN's `srgb_forward`), in f64 so that 1 maps to exactly 1.
+fn srgb_f64(y: f64) -> f64 {
+    if y <= SRGB_Y0 { SRGB_A * y } else { SRGB_B * y.powf(SRGB_C) + SRGB_D }
+}
+
+/// OIDN's evaluation transform of one exposed linear value, `srgb(filmic(x))`, in [0, 1]: what its
+/// `compare_image.py` and hush's metrics apply before PSNR and SSIM (`transform_feature(image, 'hdr', 'srgb',
+/// exposure)` in `training/dataset.py`).
+pub fn display(x: f32) -> f64 {
+    srgb_f64(filmic_f64(x))
+}
+
+/// [`display`] on a tensor of exposed linear values, differentiable, for training losses measured where the
+/// evaluation measures. Two changes keep a gradient everywhere, where [`display`] is flat: below 0 it continues
+/// as the line of its slope at 0 (a negative prediction is pulled up, not ignored), and above the white point
+/// the filmic curve is not clamped to 1 (it rises on slowly towards its asymptote, about 1.06). Between 0 and
+/// the white point it is [`display`] up to f32 rounding.
+pub fn display_tensor(y: &Tensor) -> Result<Tensor> {
+    let x = (y.maximum(0.0)? * FILMIC_SCALE)?;
+    let numerator = ((&x * x.affine(HABLE_A, HABLE_C * HABLE_B)?)? + HABLE_D * HABLE_E)?;
+    let denominator = ((&x * x.affine(HABLE_A, HABLE_B)?)? + HABLE_D * HABLE_F)?;
+    let filmic = (((numerator / denominator)? - HABLE_E / HABLE_F)? / hable(FILMIC_WHITE))?;
+    let curve = Transfer::Srgb.forward_tensor(&filmic)?;
+    // d display / dx at 0: sRGB's linear segment times hable'(0)·scale / hable(white), where
+    // hable'(0) = B·(C·F − E) / (D·F²).
+    let slope = SRGB_A * HABLE_B * (HABLE_C * HABLE_F - HABLE_E) / (HABLE_D * HABLE_F * HABLE_F) * FILMIC_SCALE
+        / hable(FILMIC_WHITE);
+    y.lt(0.0)?.where_cond(&(y * slope)?, &curve)
+}
+
 /// A transfer function from linear values to what the network sees.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]

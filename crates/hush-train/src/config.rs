@@ -1,7 +1,7 @@
 //! [`TrainConfig`]: everything that determines a training run.
 
 use hush_net::transfer::Transfer;
-use hush_net::{ALIGNMENT, InputFeatures, Loss, ModelInfo, NetConfig, UNetConfig};
+use hush_net::{ALIGNMENT, InputFeatures, Loss, LossSpace, ModelInfo, NetConfig, UNetConfig};
 use serde::{Deserialize, Serialize};
 
 use crate::{Augment, OptimizerConfig, Result, Schedule, TrainError};
@@ -17,6 +17,9 @@ pub struct TrainConfig {
     /// A U-Net or the patch MLP; run configurations from before the patch MLP read as U-Nets.
     pub net: NetConfig,
     pub loss: Loss,
+    /// Where the loss compares output and target; absent from configurations written before it existed.
+    #[serde(default, skip_serializing_if = "LossSpace::is_transfer")]
+    pub loss_space: LossSpace,
     pub optimizer: OptimizerConfig,
     /// The base learning rate the schedule scales (the thesis: 1e-4, constant; for one-cycle the maximum).
     pub lr: f64,
@@ -77,6 +80,7 @@ impl TrainConfig {
             transfer: Transfer::Pu,
             net,
             loss: Loss::Mix,
+            loss_space: LossSpace::Transfer,
             optimizer: OptimizerConfig::adam(),
             lr: 1e-4,
             schedule: Schedule::Constant,

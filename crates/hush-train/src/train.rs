@@ -232,7 +232,7 @@ pub fn train(
             let input = Tensor::from_vec(batch.input, (n, c, s, s), device)?;
             let target = Tensor::from_vec(batch.target, (n, 3, s, s), device)?;
             let output = net.forward(&input)?;
-            let loss = cfg.loss.compute(&output, &target)?;
+            let loss = cfg.loss_space.compute(cfg.loss, cfg.transfer, &output, &target)?;
             let value = loss.to_dtype(DType::F64)?.to_scalar::<f64>()?;
             let diverged = |cause: String, log: Vec<LossRow>| -> Result<()> {
                 let weights = save_weights(&varmap, &info)?;
@@ -350,7 +350,11 @@ fn test_loss(net: &Net, cfg: &TrainConfig, test: &[TrainSample], device: &Device
             Ok(t.narrow(2, y0, h16)?.narrow(3, x0, w16)?)
         };
         let output = net.forward(&crop(&s.input)?)?;
-        sum += cfg.loss.compute(&output, &crop(&s.target)?)?.to_dtype(DType::F64)?.to_scalar::<f64>()?;
+        sum += cfg
+            .loss_space
+            .compute(cfg.loss, cfg.transfer, &output, &crop(&s.target)?)?
+            .to_dtype(DType::F64)?
+            .to_scalar::<f64>()?;
     }
     Ok(sum / test.len() as f64)
 }

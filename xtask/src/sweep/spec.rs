@@ -19,6 +19,7 @@ const TRAIN_KEYS: &[&str] = &[
     "arch",
     "width",
     "loss",
+    "loss-space",
     "optimizer",
     "lr",
     "schedule",

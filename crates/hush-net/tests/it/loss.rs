@@ -509,3 +509,22 @@ fn non_finite_input_never_blanks_the_image() -> Result<()> {
     assert!(far.iter().filter(|v| **v > 0.0).count() > far.len() / 2, "the far side was blanked");
     Ok(())
 }
+
+/// MSE in the tonemapped loss space, of PU-encoded images, is the MSE of their tonemapped linear values
+/// (what hush eval's PSNR is computed from), up to f32 rounding through the PU round trip (1e-4 relative).
+#[test]
+fn tonemapped_mse_is_the_metrics_mse() -> Result<()> {
+    use hush_net::LossSpace;
+    use hush_net::transfer::{Transfer, display, pu_forward};
+    let (n, c, h, w) = (1, 3, 4, 5);
+    let a: Vec<f32> = (0..n * c * h * w).map(|i| ((i * 37 % 23) as f32 / 4.0).powi(2) / 10.0).collect();
+    let b: Vec<f32> = (0..n * c * h * w).map(|i| ((i * 11 % 19) as f32 / 3.0).powi(2) / 10.0).collect();
+    let expected = a.iter().zip(&b).map(|(x, y)| (display(*x) - display(*y)).powi(2)).sum::<f64>() / a.len() as f64;
+    let encode =
+        |v: &[f32]| Tensor::from_vec(v.iter().map(|&x| pu_forward(x)).collect::<Vec<_>>(), (n, c, h, w), &Device::Cpu);
+    let got = scalar(&LossSpace::Tonemapped.compute(Loss::Mse, Transfer::Pu, &encode(&a)?, &encode(&b)?)?);
+    assert!((got - expected).abs() < 1e-4 * expected, "tonemapped MSE {got}, metric's {expected}");
+    let plain = scalar(&LossSpace::Transfer.compute(Loss::Mse, Transfer::Pu, &encode(&a)?, &encode(&b)?)?);
+    assert!((plain - expected).abs() > 1e-3 * expected, "the transfer space should differ: {plain} vs {expected}");
+    Ok(())
+}

@@ -101,3 +101,34 @@ fn autoexposure_follows_oidn() {
     let expected = 0.18 / (0.25f64 * 1.0).exp2(); // log2 means: 1, 0, 0, 0
     assert!((autoexposure(&img, 20, 20) as f64 - expected).abs() < 1e-6);
 }
+
+/// The differentiable evaluation transform that `--loss-space tonemapped` trains through is the metrics'
+/// `display` between 0 and the white point (1e-5: f32 against f64), continues linearly below 0 and keeps
+/// rising above the white point, and has a finite, positive gradient everywhere a network output can land.
+#[test]
+fn display_tensor_is_the_evaluation_transform_with_a_gradient_everywhere() -> Result<()> {
+    use hush_net::transfer::{display, display_tensor};
+    let dev = Device::Cpu;
+    let inside = [0.0f32, 1e-5, 1e-3, 0.01, 0.18, 0.5, 1.0, 3.0, 6.0];
+    let out = display_tensor(&Tensor::new(&inside[..], &dev)?)?.to_vec1::<f32>()?;
+    for (x, d) in inside.iter().zip(&out) {
+        assert!((f64::from(*d) - display(*x)).abs() < 1e-5, "display_tensor({x}) = {d}, display = {}", display(*x));
+    }
+    // Below 0: the line of the slope at 0, continuous there.
+    let near = display_tensor(&Tensor::new(&[-1e-4f32, 1e-4, -0.5, -1.0][..], &dev)?)?.to_vec1::<f32>()?;
+    assert!((near[0] + near[1]).abs() < 1e-6, "not continuous and odd-linear at 0: {near:?}");
+    assert!((near[3] - 2.0 * near[2]).abs() < 1e-5 && near[3] < 0.0, "not linear below 0: {near:?}");
+    // Above the white point (11.2 / 1.758141 ≈ 6.37): still increasing, where `display` is flat at 1.
+    let high = display_tensor(&Tensor::new(&[6.0f32, 20.0, 1e3, 1e6][..], &dev)?)?.to_vec1::<f32>()?;
+    assert!(high.windows(2).all(|w| w[0] < w[1]) && high[3] < 1.1, "{high:?}");
+    assert_eq!(display(20.0), display(1e3));
+    // Gradients: finite and positive on every side.
+    let grid = [-1.0f32, -1e-3, 0.0, 1e-6, 0.1, 1.0, 6.0, 100.0, 1e6];
+    let x = candle_core::Var::new(&grid[..], &dev)?;
+    let grads = display_tensor(x.as_tensor())?.sum_all()?.backward()?;
+    let g = grads.get(x.as_tensor()).expect("a gradient").to_vec1::<f32>()?;
+    for (x, g) in grid.iter().zip(&g) {
+        assert!(g.is_finite() && *g > 0.0, "gradient {g} at {x}");
+    }
+    Ok(())
+}

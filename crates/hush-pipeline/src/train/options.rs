@@ -4,7 +4,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use hush_dataset::AuxSource;
-use hush_net::{Activation, InputFeatures, Loss, NetConfig, PatchMlpConfig, Pretrained, UNetConfig, UNetKind};
+use hush_net::{
+    Activation, InputFeatures, Loss, LossSpace, NetConfig, PatchMlpConfig, Pretrained, UNetConfig, UNetKind,
+};
 use hush_train::{Augment, InitRecord, OptimizerConfig, Schedule, TrainConfig};
 use serde::{Deserialize, Serialize};
 
@@ -89,6 +91,11 @@ pub struct TrainOptions {
     /// Loss: l1, mse, ssim, msssim, mix (0.16·L1 + 0.84·(1 − MS-SSIM)), mape, smape, l1_grad [default: mix].
     #[cfg_attr(feature = "clap", arg(long))]
     pub loss: Option<String>,
+    /// Where the loss compares output and target: transfer (in the network's transfer space, PU for HDR
+    /// color: OIDN's choice) or tonemapped (through OIDN's evaluation tonemap, filmic and sRGB, at the
+    /// reference's exposure: where hush eval measures PSNR) [default: transfer].
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub loss_space: Option<String>,
     /// Optimizer: adam, adamw (decoupled weight decay 0.01), sgd, sgd_momentum (0.9) [default: adam].
     #[cfg_attr(feature = "clap", arg(long))]
     pub optimizer: Option<String>,
@@ -179,6 +186,7 @@ impl TrainOptions {
             arch,
             width,
             loss,
+            loss_space,
             optimizer,
             lr,
             schedule,
@@ -391,6 +399,12 @@ pub fn resolve_with_init(
         Some(l) => parse_loss(l)?,
         None => d.loss,
     };
+    let loss_space = match &args.loss_space {
+        Some(l) => {
+            LossSpace::parse(l).with_context(|| format!("unknown --loss-space '{l}': use transfer or tonemapped"))?
+        }
+        None => d.loss_space,
+    };
     let batch = args.batch.unwrap_or(d.batch);
     let epoch_steps = args
         .epoch_steps
@@ -419,6 +433,7 @@ pub fn resolve_with_init(
         transfer: d.transfer,
         net,
         loss,
+        loss_space,
         optimizer,
         lr: args.lr.unwrap_or(d.lr),
         schedule,

@@ -85,6 +85,25 @@ fn loss_goes_down_on_a_toy_denoising_problem() {
     assert!(!trained.stopped_early);
 }
 
+/// With the loss measured through the evaluation's tonemap, training runs the same loop and learns; a
+/// configuration written before loss spaces existed reads as the transfer space, and the default is not
+/// written, so such runs' config.json stay byte for byte what they were.
+#[test]
+fn the_tonemapped_loss_space_trains_and_old_configurations_read_as_transfer() {
+    let samples = synthetic(4);
+    let mut cfg = config(30);
+    cfg.loss_space = hush_net::LossSpace::Tonemapped;
+    let l = losses(&run(&cfg, &samples).unwrap());
+    let first: f64 = l[..5].iter().sum::<f64>() / 5.0;
+    let last: f64 = l[25..].iter().sum::<f64>() / 5.0;
+    assert!(last < 0.5 * first, "loss did not drop enough: first steps {first:.4}, last steps {last:.4}: {l:?}");
+    let plain = serde_json::to_value(config(30)).unwrap();
+    assert!(plain.get("loss_space").is_none(), "the default loss space is written: {plain}");
+    assert_eq!(serde_json::from_value::<TrainConfig>(plain).unwrap().loss_space, hush_net::LossSpace::Transfer);
+    let written = serde_json::to_value(&cfg).unwrap();
+    assert_eq!(written["loss_space"], "tonemapped");
+}
+
 /// The patch MLP trains in the same loop, on the same crops and loss, and its weights load back as one.
 #[test]
 fn the_patch_mlp_trains_like_the_unets() {
