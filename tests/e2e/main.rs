@@ -153,10 +153,16 @@ fn render_writes_every_layer() {
         "specular.B",
         "specular.G",
         "specular.R",
+        "variance.B",
+        "variance.G",
+        "variance.R",
     ];
     expect.sort_unstable();
     assert_eq!(names, expect);
     assert_eq!((exr.width, exr.height), (24, 16));
+    // The variance of each pixel's value is finite and not negative, and somewhere above 0 at 2 spp.
+    let variance = &exr.channels["variance.R"];
+    assert!(variance.iter().all(|v| v.is_finite() && *v >= 0.0) && variance.iter().any(|v| *v > 0.0));
     let stats: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
     assert_eq!(stats["paths"].as_f64(), Some(24.0 * 16.0 * 2.0));
     assert!(stats["warm_up_cpu_seconds"].is_null(), "no warm-up was asked for: {stats}");

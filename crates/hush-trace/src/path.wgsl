@@ -63,8 +63,9 @@ struct Light {
 @group(0) @binding(2) var<storage, read> normals: array<TriNormals>;
 @group(0) @binding(3) var<storage, read> materials: array<Material>;
 @group(0) @binding(4) var<storage, read> lights: array<Light>;
-// Per pixel, ACCUM_STRIDE floats: beauty sum (3), beauty squared sum (3), albedo (3),
-// diffuse (3), specular (3), normal (3), count of non-finite samples discarded (1).
+// Per pixel, ACCUM_STRIDE floats: beauty mean (3) and the sum of squared deviations from that mean
+// (3) over the samples so far, then sums of albedo (3), diffuse (3), specular (3), normal (3), and the
+// count of non-finite samples discarded (1).
 @group(0) @binding(5) var<storage, read_write> accum: array<f32>;
 @group(0) @binding(6) var<storage, read> nodes: array<WideNode>;
 
@@ -677,6 +678,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     // the SIMD lanes that run neighbouring pixels together (8 per vector on lavapipe) stay busy
     // until all of their samples are done instead of waiting for the longest path of each sample.
     var done = 0u;
+    // This dispatch's beauty samples, shifted by its first one: sums of the deviations and of their
+    // squares, from which its mean and squared deviations follow without the cancellation of
+    // E[x²] − E[x]² (exactly 0 for a constant pixel at any spp).
+    var shift = vec3<f32>(0.0);
+    var dev = vec3<f32>(0.0);
+    var dev2 = vec3<f32>(0.0);
     var st = start_path(gid.xy, pixel_index, params.sample_offset);
     loop {
         if bounce(&st) {
@@ -690,8 +697,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             c = vec3<f32>(0.0);
             acc[18] += 1.0;
         }
-        acc[0] += c.x; acc[1] += c.y; acc[2] += c.z;
-        acc[3] += c.x * c.x; acc[4] += c.y * c.y; acc[5] += c.z * c.z;
+        if done == 0u {
+            shift = c;
+        }
+        let d = c - shift;
+        dev += d;
+        dev2 += d * d;
         acc[6] += r.albedo.x; acc[7] += r.albedo.y; acc[8] += r.albedo.z;
         acc[9] += r.diffuse.x; acc[10] += r.diffuse.y; acc[11] += r.diffuse.z;
         acc[12] += r.specular.x; acc[13] += r.specular.y; acc[14] += r.specular.z;
@@ -702,6 +713,18 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         st = start_path(gid.xy, pixel_index, params.sample_offset + done);
     }
+    // Merge this dispatch's samples into those before it (Chan, Golub & LeVeque's pairwise update):
+    // every pixel has had `sample_offset` samples before this dispatch.
+    let nb = f32(done);
+    let mean_b = shift + dev / nb;
+    let m2_b = max(dev2 - dev * dev / nb, vec3<f32>(0.0));
+    let na = f32(params.sample_offset);
+    let mean_a = vec3<f32>(acc[0], acc[1], acc[2]);
+    let delta = mean_b - mean_a;
+    let mean = mean_a + delta * (nb / (na + nb));
+    let m2 = vec3<f32>(acc[3], acc[4], acc[5]) + m2_b + delta * delta * (na * nb / (na + nb));
+    acc[0] = mean.x; acc[1] = mean.y; acc[2] = mean.z;
+    acc[3] = m2.x; acc[4] = m2.y; acc[5] = m2.z;
     for (var k = 0u; k < ACCUM_STRIDE; k++) {
         accum[base + k] = acc[k];
     }

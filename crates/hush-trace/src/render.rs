@@ -486,11 +486,10 @@ fn unpack(data: &[f32], w: usize, h: usize, spp: u32) -> RenderOutput {
     let mut discarded = 0u64;
     for px in data.chunks_exact(ACCUM_STRIDE) {
         for c in 0..3 {
-            let mean = px[c] as f64 / n;
-            let second = px[3 + c] as f64 / n;
-            color.data.push(mean as f32);
+            // The kernel keeps the beauty's running mean and sum of squared deviations (merged per dispatch).
+            color.data.push(px[c]);
             // Unbiased sample variance, divided by n for the variance of the mean.
-            let sample_var = if spp > 1 { ((second - mean * mean) * n / (n - 1.0)).max(0.0) } else { 0.0 };
+            let sample_var = if spp > 1 { (px[3 + c] as f64 / (n - 1.0)).max(0.0) } else { 0.0 };
             var.data.push((sample_var / n) as f32);
             albedo.data.push((px[6 + c] as f64 / n) as f32);
             diffuse.data.push((px[9 + c] as f64 / n) as f32);

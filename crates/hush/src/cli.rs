@@ -25,7 +25,8 @@ pub struct Cli {
 #[allow(clippy::large_enum_variant)]
 #[derive(Subcommand, Debug)]
 pub enum Command {
-    /// Render a scene to a multi-layer EXR (beauty, albedo, diffuse, specular, normal).
+    /// Render a scene to a multi-layer EXR (beauty, albedo, diffuse, specular, normal, and the variance of each
+    /// beauty pixel: its samples' variance / spp, computed stably).
     Render(RenderArgs),
     /// Render a dataset: several views of scenes, noisy images along an spp ladder, clean
     /// auxiliary features and references.

@@ -52,6 +52,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
             ("diffuse", &out.diffuse),
             ("specular", &out.specular),
             ("normal", &out.normal),
+            ("variance", &out.color_variance),
         ],
     )
     .with_context(|| format!("writing {}", args.out.display()))?;
