@@ -1,6 +1,7 @@
 //! Training losses and the SSIM metric, on NCHW tensors. Every function checks shapes first and returns a
 //! scalar (rank-0) tensor through which gradients flow. The set is OIDN's (`training/loss.py`): L1, MSE
-//! (`l2`), MAPE, SMAPE, SSIM, MS-SSIM, L1 + MS-SSIM (the thesis' mix) and L1 + gradient (`l1_grad`).
+//! (`l2`), MAPE, SMAPE, SSIM, MS-SSIM, L1 + MS-SSIM (the thesis' mix) and L1 + gradient (`l1_grad`), and
+//! one of hush's own, [`log_mse`], the objective of a mean PSNR over images.
 //!
 //! Losses take what the network sees, i.e. images after [`crate::prepare_color`], whose sanitization policy
 //! (non-finite → 0, then the transfer and the ≤ 1 clamp) keeps raw radiance of any magnitude, NaN and ±Inf
@@ -71,6 +72,8 @@ pub enum Loss {
     Smape,
     /// 0.5 · L1 + 0.5 · [`gradient_l1`] (OIDN's `l1_grad`).
     L1Grad,
+    /// [`log_mse`]: the mean over images of `ln(1 + MSE / 1e-5)`, the mean PSNR's objective.
+    LogMse,
 }
 
 impl Loss {
@@ -85,13 +88,14 @@ impl Loss {
             Loss::Mape => mape(x, y),
             Loss::Smape => smape(x, y),
             Loss::L1Grad => l1_grad(x, y),
+            Loss::LogMse => log_mse(x, y),
         }
     }
 
-    pub const ALL: [Loss; 8] =
-        [Loss::L1, Loss::Mse, Loss::Ssim, Loss::MsSsim, Loss::Mix, Loss::Mape, Loss::Smape, Loss::L1Grad];
+    pub const ALL: [Loss; 9] =
+        [Loss::L1, Loss::Mse, Loss::Ssim, Loss::MsSsim, Loss::Mix, Loss::Mape, Loss::Smape, Loss::L1Grad, Loss::LogMse];
 
-    /// The serialized name (`l1`, `mse`, `ssim`, `ms_ssim`, `mix`, `mape`, `smape`, `l1_grad`).
+    /// The serialized name (`l1`, `mse`, `ssim`, `ms_ssim`, `mix`, `mape`, `smape`, `l1_grad`, `log_mse`).
     pub fn name(self) -> &'static str {
         match self {
             Loss::L1 => "l1",
@@ -102,6 +106,7 @@ impl Loss {
             Loss::Mape => "mape",
             Loss::Smape => "smape",
             Loss::L1Grad => "l1_grad",
+            Loss::LogMse => "log_mse",
         }
     }
 
@@ -202,6 +207,26 @@ pub fn l1(x: &Tensor, y: &Tensor) -> Result<Tensor> {
 pub fn mse(x: &Tensor, y: &Tensor) -> Result<Tensor> {
     check_same_shape("mse", x, y)?;
     (x - y)?.sqr()?.mean_all()
+}
+
+/// The MSE below which [`log_mse`] stops weighting an image up: 1e-5, 50 dB of PSNR for values in [0, 1].
+pub const LOG_MSE_FLOOR: f64 = 1e-5;
+
+/// The mean over the batch's images (NCHW) of `ln(1 + MSE_i / LOG_MSE_FLOOR)`, each image's own MSE.
+///
+/// A mean of PSNRs is a mean of `−10·log10(MSE_i)`: lowering it by training weighs each image's squared
+/// errors by `1 / MSE_i`, so that a 64-spp image, whose MSE is a hundred times smaller than a 4-spp one's,
+/// counts as much, as it does in the mean PSNR; MSE or L1 over the batch let the noisiest images decide.
+/// The floor keeps images already above 50 dB from dominating (the gradient weight is `1 / (MSE_i +
+/// floor)`) and the loss positive. In the tonemapped loss space ([`LossSpace::Tonemapped`]) on whole
+/// images this is the objective of `hush eval`'s mean PSNR.
+pub fn log_mse(x: &Tensor, y: &Tensor) -> Result<Tensor> {
+    check_same_shape("log_mse", x, y)?;
+    if x.rank() != 4 {
+        bail!("log_mse: expected NCHW tensors, got {:?}", x.dims());
+    }
+    let per_image = (x - y)?.sqr()?.flatten_from(1)?.mean(1)?;
+    (per_image / LOG_MSE_FLOOR)?.affine(1.0, 1.0)?.log()?.mean_all()
 }
 
 /// OIDN's `mape`: mean of `|x − y| / (|y| + 0.01)`, an L1 relative to the target.

@@ -215,7 +215,7 @@ fn losses_have_the_documented_values() -> Result<()> {
     assert!((scalar(&Loss::MsSsim.compute(&x, &y)?) - (1.0 - ms)).abs() < 1e-7);
     assert_eq!(
         serde_json::to_string(&Loss::ALL).unwrap(),
-        r#"["l1","mse","ssim","ms_ssim","mix","mape","smape","l1_grad"]"#
+        r#"["l1","mse","ssim","ms_ssim","mix","mape","smape","l1_grad","log_mse"]"#
     );
     for l in Loss::ALL {
         assert_eq!(serde_json::to_string(&l).unwrap(), format!("\"{}\"", l.name()));
@@ -328,6 +328,32 @@ fn ssim_gradient_matches_finite_differences() -> Result<()> {
         let numeric = (f(plus)? - f(minus)?) / (2.0 * eps);
         assert!((numeric - g64[i]).abs() < 1e-6 + 1e-4 * numeric.abs(), "element {i}: {numeric} vs {}", g64[i]);
     }
+    Ok(())
+}
+
+/// `log_mse` by hand: two images whose MSEs differ a hundredfold count alike, as in a mean PSNR.
+#[test]
+fn log_mse_is_the_mean_of_each_images_log_mse() -> Result<()> {
+    let dev = Device::Cpu;
+    // Image 0 is off by 0.1 everywhere (MSE 1e-2), image 1 by 0.01 (MSE 1e-4).
+    let y = Tensor::zeros((2, 3, 4, 4), candle_core::DType::F32, &dev)?;
+    let x = Tensor::cat(&[(y.narrow(0, 0, 1)? + 0.1)?, (y.narrow(0, 1, 1)? + 0.01)?], 0)?;
+    let expected = ((1.0f64 + 1e-2 / 1e-5).ln() + (1.0f64 + 1e-4 / 1e-5).ln()) / 2.0;
+    assert!((scalar(&Loss::LogMse.compute(&x, &y)?) - expected).abs() < 1e-4 * expected);
+    // Each image's gradient is its squared error's scaled by 1 / (MSE_i + 1e-5): per pixel 2·d / (n·(MSE_i + floor))
+    // halved by the batch mean.
+    let var = Var::from_tensor(&x)?;
+    let g = Loss::LogMse.compute(var.as_tensor(), &y)?.backward()?;
+    let g = values(g.get(&var).expect("gradient"));
+    let n = 48.0;
+    let (g0, g1) = (2.0 * 0.1 / (n * (1e-2 + 1e-5)) / 2.0, 2.0 * 0.01 / (n * (1e-4 + 1e-5)) / 2.0);
+    assert!(
+        (f64::from(g[0]) - g0).abs() < 1e-3 * g0 && (f64::from(g[48]) - g1).abs() < 1e-3 * g1,
+        "{} {}",
+        g[0],
+        g[48]
+    );
+    assert!(Loss::LogMse.compute(&x.flatten_all()?, &y.flatten_all()?).is_err(), "not NCHW");
     Ok(())
 }
 

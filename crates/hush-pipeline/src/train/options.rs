@@ -88,7 +88,8 @@ pub struct TrainOptions {
     /// four hidden layers of 2047 units) [default: 0.25].
     #[cfg_attr(feature = "clap", arg(long))]
     pub width: Option<f64>,
-    /// Loss: l1, mse, ssim, msssim, mix (0.16·L1 + 0.84·(1 − MS-SSIM)), mape, smape, l1_grad [default: mix].
+    /// Loss: l1, mse, ssim, msssim, mix (0.16·L1 + 0.84·(1 − MS-SSIM)), mape, smape, l1_grad, log_mse (the mean
+    /// over images of ln(1 + MSE/1e-5): a mean PSNR's objective) [default: mix].
     #[cfg_attr(feature = "clap", arg(long))]
     pub loss: Option<String>,
     /// Where the loss compares output and target: transfer (in the network's transfer space, PU for HDR
@@ -271,8 +272,9 @@ pub fn parse_loss(s: &str) -> Result<Loss> {
         "ssim" => Loss::Ssim,
         "msssim" | "ms-ssim" | "ms_ssim" => Loss::MsSsim,
         "mix" | "l1_msssim" => Loss::Mix,
-        _ => serde_json::from_value(serde_json::Value::String(s.into()))
-            .map_err(|_| anyhow::anyhow!("unknown loss '{s}': use l1, mse, ssim, msssim or mix"))?,
+        _ => serde_json::from_value(serde_json::Value::String(s.into())).map_err(|_| {
+            anyhow::anyhow!("unknown loss '{s}': use l1, mse, ssim, msssim, mix, mape, smape, l1_grad or log_mse")
+        })?,
     })
 }
 
