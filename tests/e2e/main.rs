@@ -214,6 +214,14 @@ fn pipeline_runs_end_to_end() {
         std::fs::read_to_string(ds.join("manifest.json")).unwrap(),
         "a re-run must reuse every finished render"
     );
+    // Each noisy render's variance is stored beside it and recorded in the manifest; at 2 spp some pixel
+    // of the box has a variance above 0.
+    let parsed: serde_json::Value = serde_json::from_str(&manifest).unwrap();
+    let noisy = &parsed["views"][0]["noisy"][1];
+    let expected = noisy["file"].as_str().unwrap().replace(".hdr.exr", ".var.exr");
+    assert_eq!(noisy["variance"].as_str(), Some(expected.as_str()), "{noisy}");
+    let variance = hush_dataset::read_rgb(ds.join(noisy["variance"].as_str().unwrap())).unwrap();
+    assert!(variance.data.iter().all(|v| v.is_finite() && *v >= 0.0) && variance.data.iter().any(|v| *v > 0.0));
 
     expect_success(&[
         "train",

@@ -140,6 +140,11 @@ impl Layout {
         format!("{scene}_{view}_{spp:06}.hdr.exr")
     }
 
+    /// `<scene>_<view>_<spp:06>.var.exr`: the variance of each pixel of that noisy render's beauty.
+    pub fn noisy_variance_name(scene: &str, view: &str, spp: u32) -> String {
+        format!("{scene}_{view}_{spp:06}.var.exr")
+    }
+
     /// `<scene>_<view>_ref.hdr.exr`.
     pub fn reference_name(scene: &str, view: &str) -> String {
         format!("{scene}_{view}_ref.hdr.exr")

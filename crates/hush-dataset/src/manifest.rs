@@ -45,6 +45,10 @@ pub struct RenderRecord {
     /// has, and what OIDN's default weights expect). `None` in datasets from before they were stored.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub aux: Option<AuxFiles>,
+    /// The estimated variance of each beauty pixel's value (its samples' variance / spp, per channel):
+    /// `<scene>_<view>_<spp>.var.exr`. `None` for renders from before it was stored, which are kept.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub variance: Option<String>,
 }
 
 /// The four auxiliary images of one render.
@@ -498,8 +502,8 @@ impl Manifest {
         self.views.iter().filter(move |v| v.split == split)
     }
 
-    /// Every file a finished view consists of, relative to the root (noisy renders with their OIDN feature
-    /// files, the reference and the four features).
+    /// Every file a finished view consists of, relative to the root (noisy renders with their feature
+    /// files and variance where recorded, the reference and the four features).
     pub fn files_of(view: &ViewRecord) -> Vec<String> {
         let mut files = Vec::new();
         for r in &view.noisy {
@@ -512,6 +516,7 @@ impl Manifest {
                     }
                 }
             }
+            files.extend(r.variance.iter().cloned());
         }
         files.push(view.reference.file.clone());
         files.extend(crate::AuxKind::ALL.iter().map(|&k| view.aux.file(k).to_string()));

@@ -13,6 +13,7 @@ pub fn record(scene: &str, view: &str, spps: &[u32], size: u32) -> ViewRecord {
         file,
         render_seconds: 0.5,
         aux: Some(AuxFiles::from_fn(|kind| Layout::noisy_aux_name(scene, view, spp, kind))),
+        variance: None,
     };
     ViewRecord {
         scene: scene.into(),

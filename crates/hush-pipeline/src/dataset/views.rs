@@ -235,8 +235,17 @@ pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u3
                 for kind in AuxKind::ALL {
                     write_rgb(ctx.layout.path(own.file(kind)), aux_image(&out, kind))?;
                 }
+                let variance = Layout::noisy_variance_name(name, &view, spp);
+                write_rgb(ctx.layout.path(&variance), &out.color_variance)?;
                 write_rgb(ctx.layout.path(&file), &out.color)?;
-                progress.noisy.push(RenderRecord { spp, seed, file, render_seconds: out.seconds, aux: Some(own) });
+                progress.noisy.push(RenderRecord {
+                    spp,
+                    seed,
+                    file,
+                    render_seconds: out.seconds,
+                    aux: Some(own),
+                    variance: Some(variance),
+                });
                 ctx.rendered += 1;
                 ctx.record(&progress)?;
             }
