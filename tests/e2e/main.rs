@@ -222,6 +222,10 @@ fn pipeline_runs_end_to_end() {
     assert_eq!(noisy["variance"].as_str(), Some(expected.as_str()), "{noisy}");
     let variance = hush_dataset::read_rgb(ds.join(noisy["variance"].as_str().unwrap())).unwrap();
     assert!(variance.data.iter().all(|v| v.is_finite() && *v >= 0.0) && variance.data.iter().any(|v| *v > 0.0));
+    // A lost variance file is a render to redo, as `hush dataset check` says.
+    std::fs::remove_file(ds.join(&expected)).unwrap();
+    expect_success(&dataset_args);
+    assert_eq!(hush_dataset::read_rgb(ds.join(&expected)).unwrap().data, variance.data, "the same render again");
 
     expect_success(&[
         "train",

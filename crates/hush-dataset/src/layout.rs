@@ -8,6 +8,8 @@
 //! <root>/<scene>_<view>_000004.nrm.exr       spp (OIDN's toolkit reads `.alb` and `.nrm` beside every noisy
 //! <root>/<scene>_<view>_000004.diff.exr      render). Datasets from before these were stored hold hard links
 //! <root>/<scene>_<view>_000004.spec.exr      to the clean `_ref` features under the first two names instead
+//! <root>/<scene>_<view>_000004.var.exr     the variance of each pixel of that noisy render (R,G,B; none in
+//!                                            datasets from before it was stored)
 //! <root>/<scene>_<view>_ref.hdr.exr        the reference (R,G,B)
 //! <root>/<scene>_<view>_ref.alb.exr        clean albedo (R,G,B)
 //! <root>/<scene>_<view>_ref.nrm.exr        clean shading normal (R,G,B = x,y,z)

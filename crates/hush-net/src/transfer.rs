@@ -186,13 +186,16 @@ pub fn display(x: f32) -> f64 {
 /// [`display`] on a tensor of exposed linear values, differentiable, for training losses measured where the
 /// evaluation measures. Two changes keep a gradient everywhere, where [`display`] is flat: below 0 it continues
 /// as the line of its slope at 0 (a negative prediction is pulled up, not ignored), and above the white point
-/// the filmic curve is not clamped to 1 (it rises on slowly towards its asymptote, about 1.06). Between 0 and
-/// the white point it is [`display`] up to f32 rounding.
+/// the filmic curve is not clamped to 1 (it rises on slowly towards about 1.12, 1.05 after sRGB). Between 0
+/// and the white point it is [`display`] up to f32 rounding. Inputs above about 1e18 overflow (`x²`); the
+/// loss space feeds it at most the transfer function's [`HDR_Y_MAX`] times the exposure.
 pub fn display_tensor(y: &Tensor) -> Result<Tensor> {
     let x = (y.maximum(0.0)? * FILMIC_SCALE)?;
-    let numerator = ((&x * x.affine(HABLE_A, HABLE_C * HABLE_B)?)? + HABLE_D * HABLE_E)?;
+    // hable(x) written without the cancellation of its quotient at large x (where numerator and denominator
+    // both grow as A·x²): N / M − E / F = 1 − E / F − ((1 − C)·B·x + D·(F − E)) / M.
     let denominator = ((&x * x.affine(HABLE_A, HABLE_B)?)? + HABLE_D * HABLE_F)?;
-    let filmic = (((numerator / denominator)? - HABLE_E / HABLE_F)? / hable(FILMIC_WHITE))?;
+    let rest = (x.affine((1.0 - HABLE_C) * HABLE_B, HABLE_D * (HABLE_F - HABLE_E))? / denominator)?;
+    let filmic = (rest.affine(-1.0, 1.0 - HABLE_E / HABLE_F)? / hable(FILMIC_WHITE))?;
     let curve = Transfer::Srgb.forward_tensor(&filmic)?;
     // d display / dx at 0: sRGB's linear segment times hable'(0)·scale / hable(white), where
     // hable'(0) = B·(C·F − E) / (D·F²).

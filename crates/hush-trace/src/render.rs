@@ -477,7 +477,9 @@ impl<'a> Renderer<'a> {
     }
 }
 
-/// Turns per-pixel sums into means, variances of the mean and unit normals.
+/// Turns the per-pixel accumulators (the beauty's mean and sum of squared deviations, the features' sums)
+/// into means, variances of the mean and unit normals. A variance that overflowed f32 (samples above about
+/// 1e19, whose squares do) is reported as the largest finite value, so that the image stays finite.
 fn unpack(data: &[f32], w: usize, h: usize, spp: u32) -> RenderOutput {
     let n = spp as f64;
     let image = |channels| Image { width: w, height: h, channels, data: Vec::with_capacity(w * h * channels) };
@@ -490,7 +492,8 @@ fn unpack(data: &[f32], w: usize, h: usize, spp: u32) -> RenderOutput {
             color.data.push(px[c]);
             // Unbiased sample variance, divided by n for the variance of the mean.
             let sample_var = if spp > 1 { (px[3 + c] as f64 / (n - 1.0)).max(0.0) } else { 0.0 };
-            var.data.push((sample_var / n) as f32);
+            let variance = (sample_var / n) as f32;
+            var.data.push(if variance.is_finite() { variance } else { f32::MAX });
             albedo.data.push((px[6 + c] as f64 / n) as f32);
             diffuse.data.push((px[9 + c] as f64 / n) as f32);
             specular.data.push((px[12 + c] as f64 / n) as f32);

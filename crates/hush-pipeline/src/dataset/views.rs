@@ -224,8 +224,11 @@ pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u3
         let own = AuxFiles::from_fn(|kind| Layout::noisy_aux_name(name, &view, spp, kind));
         let kept = previous.as_ref().and_then(|p| p.noisy.iter().find(|r| r.spp == spp && r.seed == seed)).cloned();
         // A render is kept with its own features; one from before they were stored is rendered again.
+        // Its variance file, where it has one (renders from before those were stored have none), must be
+        // valid too: `hush dataset check` checks it, and a re-run is what mends what the check finds.
         let finished = |r: &RenderRecord| {
-            let files = std::iter::once(file.as_str()).chain(AuxKind::ALL.map(|k| own.file(k)));
+            let files =
+                std::iter::once(file.as_str()).chain(AuxKind::ALL.map(|k| own.file(k))).chain(r.variance.as_deref());
             r.file == file && r.aux.as_ref() == Some(&own) && files.into_iter().all(|f| ctx.valid(f, &camera))
         };
         match kept.filter(finished) {
