@@ -125,8 +125,7 @@ const SRGB_X0: f64 = 0.04045;
 
 /// The sRGB encoding curve (linear → sRGB), as in OIDN's `srgb_forward`.
 pub fn srgb_forward(y: f32) -> f32 {
-    let y = y as f64;
-    (if y <= SRGB_Y0 { SRGB_A * y } else { SRGB_B * y.powf(SRGB_C) + SRGB_D }) as f32
+    srgb_f64(f64::from(y)) as f32
 }
 
 /// The sRGB decoding curve (sRGB → linear).
@@ -171,7 +170,7 @@ fn filmic_f64(x: f32) -> f64 {
     (hable(f64::from(x) * FILMIC_SCALE) / hable(FILMIC_WHITE)).clamp(0.0, 1.0)
 }
 
-/// sRGB encoding (IEC 61966-2-1, the constants of OIDN's `srgb_forward`), in f64 so that 1 maps to exactly 1.
+/// [`srgb_forward`] in f64 (the constants of OIDN's `srgb_forward`), so that 1 maps to exactly 1.
 fn srgb_f64(y: f64) -> f64 {
     if y <= SRGB_Y0 { SRGB_A * y } else { SRGB_B * y.powf(SRGB_C) + SRGB_D }
 }
