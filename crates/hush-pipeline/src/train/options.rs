@@ -266,15 +266,8 @@ fn parse_arch(s: &str) -> Result<Arch> {
 }
 
 pub fn parse_loss(s: &str) -> Result<Loss> {
-    Ok(match s {
-        "l1" | "mae" => Loss::L1,
-        "l2" | "mse" => Loss::Mse,
-        "ssim" => Loss::Ssim,
-        "msssim" | "ms-ssim" | "ms_ssim" => Loss::MsSsim,
-        "mix" | "l1_msssim" => Loss::Mix,
-        _ => serde_json::from_value(serde_json::Value::String(s.into())).map_err(|_| {
-            anyhow::anyhow!("unknown loss '{s}': use l1, mse, ssim, msssim, mix, mape, smape, l1_grad or log_mse")
-        })?,
+    Loss::parse(s).with_context(|| {
+        format!("unknown loss '{s}': use l1, mse, ssim, msssim, mix, mape, smape, l1_grad or log_mse")
     })
 }
 
