@@ -167,10 +167,7 @@ impl LossSpace {
 
     /// `loss` of prediction `x` against target `y` (both after `transfer`, NCHW) in this space.
     pub fn compute(self, loss: Loss, transfer: Transfer, x: &Tensor, y: &Tensor) -> Result<Tensor> {
-        match self {
-            LossSpace::Transfer => loss.compute(x, y),
-            LossSpace::Tonemapped => loss.compute(&self.map(transfer, x)?, &self.map(transfer, y)?),
-        }
+        loss.compute(&self.map(transfer, x)?, &self.map(transfer, y)?)
     }
 }
 

@@ -266,9 +266,8 @@ fn parse_arch(s: &str) -> Result<Arch> {
 }
 
 pub fn parse_loss(s: &str) -> Result<Loss> {
-    Loss::parse(s).with_context(|| {
-        format!("unknown loss '{s}': use l1, mse, ssim, msssim, mix, mape, smape, l1_grad or log_mse")
-    })
+    Loss::parse(s)
+        .with_context(|| format!("unknown loss '{s}': use l1, mse, ssim, msssim, mix, mape, smape, l1_grad or log_mse"))
 }
 
 /// `--init`'s name for OIDN's official weights built into hush ([`crate::official`]).
