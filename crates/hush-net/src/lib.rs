@@ -31,7 +31,7 @@
 //! use hush_net::{UNet, UNetConfig, UNetKind};
 //!
 //! let device = Device::Cpu;
-//! let cfg = UNetConfig { kind: UNetKind::Unet, in_channels: 9, out_channels: 3, width: 0.25 };
+//! let cfg = UNetConfig::new(UNetKind::Unet, 9, 0.25);
 //! let varmap = VarMap::new();
 //! let net = UNet::new(VarBuilder::from_varmap(&varmap, DType::F32, &device), &cfg)?;
 //!
@@ -70,7 +70,7 @@ pub use patch_mlp::{Activation, BURGER_HIDDEN, BURGER_PATCH, BURGER_STRIDE, Patc
 pub use pretrained::Pretrained;
 pub use tza::{TzaTensor, export_tza, infer_config, load_tza, oidn_features, parse_tza, write_tza};
 pub use unet::{
-    ALIGNMENT, ConvShape, THESIS_M1_WIDTH, THESIS_M2_WIDTH, UNet, UNetConfig, UNetKind, crop, hwc_to_nchw,
-    init_weights, nchw_to_hwc, pad_to_multiple,
+    ALIGNMENT, ConvShape, Head, KERNEL_LAYER, MAX_KERNEL, THESIS_M1_WIDTH, THESIS_M2_WIDTH, UNet, UNetConfig, UNetKind,
+    apply_kernels, crop, hwc_to_nchw, init_weights, nchw_to_hwc, pad_to_multiple,
 };
 pub use weights::{F32View, METADATA_KEY, ModelInfo, load_model, load_weights, read_metadata, save_weights};

@@ -50,6 +50,14 @@ impl NetConfig {
         }
     }
 
+    /// The U-Net's output head; the patch MLP predicts colors directly.
+    pub fn head(&self) -> crate::unet::Head {
+        match self {
+            NetConfig::UNet(c) => c.head,
+            NetConfig::PatchMlp(_) => crate::unet::Head::Direct,
+        }
+    }
+
     /// The same network for another number of input channels.
     pub fn with_in_channels(&self, in_channels: usize) -> NetConfig {
         match self {
@@ -74,11 +82,22 @@ impl NetConfig {
         }
     }
 
-    /// One line for people: `unet (width 0.25, 9 input channels)`,
+    /// One line for people: `unet (width 0.25, 9 input channels)`, `unet (width 1, 9 input channels,
+    /// predicting 5×5 kernels)`,
     /// `patch_mlp (17×17 patches, stride 3, hidden 127,127,127,127, tanh, σ 4.25, 12 input channels)`.
     pub fn describe(&self) -> String {
         match self {
-            NetConfig::UNet(c) => format!("{} (width {}, {} input channels)", c.kind.name(), c.width, c.in_channels),
+            NetConfig::UNet(c) => match c.head {
+                crate::unet::Head::Direct => {
+                    format!("{} (width {}, {} input channels)", c.kind.name(), c.width, c.in_channels)
+                }
+                crate::unet::Head::Kernel { size } => format!(
+                    "{} (width {}, {} input channels, predicting {size}×{size} kernels)",
+                    c.kind.name(),
+                    c.width,
+                    c.in_channels
+                ),
+            },
             NetConfig::PatchMlp(c) => format!(
                 "{PATCH_MLP_KIND} ({p}×{p} patches, stride {}, hidden {}, {}, σ {}, {} input channels)",
                 c.stride,
@@ -309,7 +328,7 @@ mod tests {
     fn serde_reads_old_unet_configs_and_round_trips_both() {
         let old = r#"{"kind":"autoencoder","in_channels":9,"out_channels":3,"width":0.5}"#;
         let cfg: NetConfig = serde_json::from_str(old).unwrap();
-        let want = UNetConfig { kind: UNetKind::Autoencoder, in_channels: 9, out_channels: 3, width: 0.5 };
+        let want = UNetConfig::new(UNetKind::Autoencoder, 9, 0.5);
         assert_eq!(cfg, NetConfig::UNet(want));
         assert_eq!(serde_json::to_string(&cfg).unwrap(), old);
 
@@ -329,7 +348,7 @@ mod tests {
     #[test]
     fn frozen_copies_compute_the_same_without_a_graph() -> Result<()> {
         for cfg in [
-            NetConfig::from(UNetConfig { kind: UNetKind::UnetSmall, in_channels: 3, out_channels: 3, width: 0.25 }),
+            NetConfig::from(UNetConfig::new(UNetKind::UnetSmall, 3, 0.25)),
             PatchMlpConfig::burger(3, 0.01, Activation::Tanh).into(),
         ] {
             let varmap = candle_nn::VarMap::new();

@@ -15,6 +15,11 @@
 //! the source had that the new set drops is refused: its weights cannot be removed without changing what the
 //! network computes (start from weights trained without it, e.g. OIDN's `rt_hdr.tza` for color only).
 //! The patch MLP's first layer mixes channels within patches; it keeps its features as they were.
+//!
+//! **Changing the output head.** A direct U-Net's weights start a kernel-predicting one of the same kind and
+//! width ([`Pretrained::with_head`]): encoder and decoder keep their weights, the direct output layer is
+//! dropped and the kernel layer starts at zero, so every predicted kernel starts as a box filter of its
+//! size and training shapes it from the features OIDN's encoder and decoder already compute.
 
 use std::collections::HashMap;
 
@@ -25,7 +30,7 @@ use crate::input::{Feature, InputFeatures};
 use crate::net::NetConfig;
 use crate::transfer::Transfer;
 use crate::tza::{infer_config, oidn_features, parse_tza};
-use crate::unet::UNetConfig;
+use crate::unet::{Head, KERNEL_LAYER, UNetConfig};
 use crate::weights::{ModelInfo, read_metadata, serialize_weights};
 
 /// A trained network's tensors by name and what it is ([`ModelInfo`]).
@@ -137,6 +142,46 @@ impl Pretrained {
         Ok(Pretrained { info, tensors })
     }
 
+    /// These weights for the same network with output head `head` (the module docs say how). The same head
+    /// returns them unchanged; a kernel head's weights cannot start another head.
+    pub fn with_head(&self, head: Head) -> Result<Pretrained> {
+        let from = self.info.net.head();
+        if from == head {
+            return Ok(self.clone());
+        }
+        let NetConfig::UNet(unet) = &self.info.net else {
+            bail!("the patch MLP predicts colors; it has no other head")
+        };
+        let Head::Kernel { size } = head else {
+            bail!(
+                "the weights predict {} kernels; they cannot start a network with the {} head (start from \
+                 weights that predict colors, e.g. `--init oidn`)",
+                from.name(),
+                head.name()
+            )
+        };
+        if from != Head::Direct {
+            bail!("the weights predict {} kernels, not {size}×{size}; start from them with their own head", from.name())
+        }
+        let target = unet.with_head(head);
+        target.validate()?;
+        let (old, new) = (unet.conv_shapes(), target.conv_shapes());
+        let (old_out, new_out) = (old.last().expect("an output layer"), new.last().expect("an output layer"));
+        let dropped = [format!("{}.weight", old_out.name), format!("{}.bias", old_out.name)];
+        let device = self.tensors.first().map_or(Device::Cpu, |(_, t)| t.device().clone());
+        let mut tensors: Vec<(String, Tensor)> =
+            self.tensors.iter().filter(|(n, _)| !dropped.contains(n)).cloned().collect();
+        tensors.push((
+            format!("{KERNEL_LAYER}.weight"),
+            Tensor::zeros((new_out.out_channels, new_out.in_channels, 3, 3), DType::F32, &device)?,
+        ));
+        tensors.push((format!("{KERNEL_LAYER}.bias"), Tensor::zeros(new_out.out_channels, DType::F32, &device)?));
+        tensors.sort_by(|a, b| a.0.cmp(&b.0));
+        let info = ModelInfo { net: target.into(), ..self.info.clone() };
+        info.validate()?;
+        Ok(Pretrained { info, tensors })
+    }
+
     /// The weights `(1 − t)·self + t·to`, tensor by tensor: interpolation in weight space between a network and
     /// one fine-tuned from it (Wortsman et al. 2022, "Robust fine-tuning of zero-shot models": WiSE-FT). `t = 0`
     /// is `self`, `t = 1` is `to`; in between, a model that keeps more of what `self` knew about inputs unlike
@@ -230,9 +275,7 @@ mod tests {
 
     fn model(features: &str, width: f64, seed: u64) -> (VarMap, ModelInfo) {
         let features = InputFeatures::parse(features).unwrap();
-        let net: NetConfig =
-            UNetConfig { kind: UNetKind::UnetSmall, in_channels: features.in_channels(), out_channels: 3, width }
-                .into();
+        let net: NetConfig = UNetConfig::new(UNetKind::UnetSmall, features.in_channels(), width).into();
         let varmap = VarMap::new();
         Net::new(VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu), &net).unwrap();
         init_weights(&varmap, seed).unwrap();

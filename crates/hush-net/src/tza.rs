@@ -17,7 +17,7 @@ use candle_nn::VarBuilder;
 
 use crate::input::{Feature, InputFeatures};
 use crate::transfer::Transfer;
-use crate::unet::{UNet, UNetConfig, UNetKind};
+use crate::unet::{Head, UNet, UNetConfig, UNetKind};
 use crate::weights::ModelInfo;
 
 /// The most tensors a TZA table may list: OIDN's networks have about 40, hush's at most a few hundred.
@@ -216,7 +216,7 @@ pub fn infer_config(tensors: &[TzaTensor]) -> Result<UNetConfig> {
     let dims_of = |name: &str| tensors.iter().find(|t| t.name == name).map(|t| t.dims.as_slice());
     let mut tried = Vec::new();
     for kind in UNetKind::ALL {
-        let probe = UNetConfig { kind, in_channels: 1, out_channels: 1, width: 1.0 };
+        let probe = UNetConfig { out_channels: 1, ..UNetConfig::new(kind, 1, 1.0) };
         let shapes = probe.conv_shapes();
         let (first, last) = (&shapes[0], &shapes[shapes.len() - 1]);
         let (Some(&[f_out, f_in, 3, 3]), Some(&[l_out, _, 3, 3])) =
@@ -225,7 +225,7 @@ pub fn infer_config(tensors: &[TzaTensor]) -> Result<UNetConfig> {
             continue;
         };
         let width = f_out as f64 / first.out_channels as f64;
-        let cfg = UNetConfig { kind, in_channels: f_in, out_channels: l_out, width };
+        let cfg = UNetConfig { out_channels: l_out, ..UNetConfig::new(kind, f_in, width) };
         match check_shapes(&cfg, tensors) {
             Ok(()) => return Ok(cfg),
             Err(e) => tried.push(format!("{}: {e}", kind.name())),
@@ -298,6 +298,13 @@ pub fn load_tza(bytes: &[u8], features: Option<InputFeatures>, device: &Device) 
 /// Writes a network's weights as a TZA archive in OIDN's layout (layer order, `oihw`/`x`, f16), for OIDN's
 /// runtime (`oidnSetSharedFilterData(filter, "weights", ...)`). Fails if a weight does not fit f16.
 pub fn export_tza(net: &UNet) -> Result<Vec<u8>> {
+    if let Head::Kernel { size } = net.config().head {
+        bail!(
+            "TZA export: OIDN's runtime runs U-Nets that predict colors and cannot apply a network's predicted \
+             {size}×{size} kernels (--head kernel:{size}); use its .safetensors file with `hush denoise` or \
+             `hush eval` instead"
+        )
+    }
     let tensors = net
         .named_tensors()
         .into_iter()

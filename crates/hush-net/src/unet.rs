@@ -123,6 +123,69 @@ pub struct ConvShape {
     pub out_channels: usize,
 }
 
+/// What a U-Net's output layer predicts.
+///
+/// * `Direct`: the denoised color itself (OIDN's networks, the thesis's).
+/// * `Kernel { size }`: kernel prediction (Bako et al. 2017, "Kernel-predicting convolutional networks for
+///   denoising Monte Carlo renderings"; Vogels et al. 2018): the output layer (named [`KERNEL_LAYER`])
+///   gives `size²` logits per pixel, a softmax over them makes normalized weights, and the denoised pixel
+///   is the weighted average of the `size × size` neighbourhood of the noisy color in the network's
+///   transfer space (the input's first three channels; beyond the image's edge the nearest edge pixel).
+///   The output is thus a convex combination of what was rendered: it cannot invent a colour, only
+///   choose which neighbours to trust.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Head {
+    #[default]
+    Direct,
+    Kernel {
+        size: usize,
+    },
+}
+
+/// The name of a kernel-predicting network's output layer (`kernel_conv.weight`, `kernel_conv.bias`):
+/// another name than a direct network's, so weights of one are never read as the other's.
+pub const KERNEL_LAYER: &str = "kernel_conv";
+
+/// The largest kernel [`Head::Kernel`] takes (KPCN's 21×21).
+pub const MAX_KERNEL: usize = 21;
+
+impl Head {
+    pub fn is_direct(&self) -> bool {
+        *self == Head::Direct
+    }
+
+    /// `direct` or `kernel:K` (K odd, 3 to [`MAX_KERNEL`]); `kernel` alone is 5×5.
+    pub fn parse(s: &str) -> Option<Head> {
+        match s.trim() {
+            "direct" => Some(Head::Direct),
+            "kernel" | "kpcn" => Some(Head::Kernel { size: 5 }),
+            other => {
+                let size = other.strip_prefix("kernel:").or(other.strip_prefix("kpcn:"))?.trim().parse().ok()?;
+                let head = Head::Kernel { size };
+                head.validate().ok().map(|_| head)
+            }
+        }
+    }
+
+    /// What [`Head::parse`] reads back: `direct`, `kernel:5`.
+    pub fn name(&self) -> String {
+        match self {
+            Head::Direct => "direct".into(),
+            Head::Kernel { size } => format!("kernel:{size}"),
+        }
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        if let Head::Kernel { size } = *self
+            && (size % 2 == 0 || !(3..=MAX_KERNEL).contains(&size))
+        {
+            bail!("a predicted kernel is k×k with k odd, 3 to {MAX_KERNEL}; got {size}")
+        }
+        Ok(())
+    }
+}
+
 /// The shape of a [`UNet`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct UNetConfig {
@@ -134,6 +197,10 @@ pub struct UNetConfig {
     /// Multiplier on every hidden layer width: `max(1, ⌊base × width⌋)`, the thesis' rule (eq. 7.2,
     /// `c1 = ⌊c·0.66⌋`). 1.0 is OIDN's network; see [`UNetConfig::thesis_m1`] and [`UNetConfig::thesis_m2`].
     pub width: f64,
+    /// What the output layer predicts; not written when direct, so files from before kernel prediction read
+    /// and write unchanged.
+    #[serde(default, skip_serializing_if = "Head::is_direct")]
+    pub head: Head,
 }
 
 /// The thesis' M1 capacity (§7.5.2, eq. 7.2): every width `⌊c·0.66⌋`.
@@ -145,7 +212,17 @@ pub const THESIS_M2_WIDTH: f64 = 0.33;
 impl UNetConfig {
     /// OIDN's `unet` at full width with 3 output channels.
     pub fn oidn(in_channels: usize) -> Self {
-        UNetConfig { kind: UNetKind::Unet, in_channels, out_channels: 3, width: 1.0 }
+        UNetConfig { kind: UNetKind::Unet, in_channels, out_channels: 3, width: 1.0, head: Head::Direct }
+    }
+
+    /// A U-Net of `kind` at width multiplier `width` with 3 output channels, predicting them directly.
+    pub fn new(kind: UNetKind, in_channels: usize, width: f64) -> Self {
+        UNetConfig { kind, in_channels, out_channels: 3, width, head: Head::Direct }
+    }
+
+    /// The same network with another output head.
+    pub fn with_head(&self, head: Head) -> Self {
+        UNetConfig { head, ..self.clone() }
     }
 
     /// The thesis' M1: OIDN's `unet` with every hidden width `⌊c·0.66⌋`.
@@ -170,6 +247,15 @@ impl UNetConfig {
         }
         if !(self.width.is_finite() && self.width > 0.0) {
             bail!("UNetConfig: width must be a finite number > 0, got {}", self.width)
+        }
+        self.head.validate()?;
+        if !self.head.is_direct() && (self.out_channels != 3 || self.in_channels < 3) {
+            bail!(
+                "UNetConfig: a kernel-predicting network filters the input's 3 color channels into 3 output \
+                 channels; got {} in and {} out",
+                self.in_channels,
+                self.out_channels
+            )
         }
         Ok(())
     }
@@ -207,7 +293,10 @@ impl UNetConfig {
                 c = out;
             }
         }
-        shapes.push(ConvShape { name: plan.out, in_channels: c, out_channels: self.out_channels });
+        shapes.push(match self.head {
+            Head::Direct => ConvShape { name: plan.out, in_channels: c, out_channels: self.out_channels },
+            Head::Kernel { size } => ConvShape { name: KERNEL_LAYER, in_channels: c, out_channels: size * size },
+        });
         shapes
     }
 
@@ -215,20 +304,27 @@ impl UNetConfig {
     /// [`ALIGNMENT`]): every 3×3 convolution at the resolution it runs at (encoder level `l` at
     /// `1/2^l`, the decoder levels at 1/8, 1/4, 1/2, 1, the output layer at full size). Pooling,
     /// upsampling, biases and activations are not counted. OIDN's `unet` on 9 channels does about 125k
-    /// per pixel (`../shared/docs/anchors.md`).
+    /// per pixel (`../shared/docs/anchors.md`). A kernel head adds its filtering, `size² × 3` per pixel
+    /// (the softmax is not counted).
     pub fn multiply_adds(&self, height: usize, width: usize) -> u64 {
         let plan = self.kind.plan();
         let enc = plan.enc.iter().enumerate().flat_map(|(l, layers)| layers.iter().map(move |_| l));
         let dec = plan.dec.iter().enumerate().flat_map(|(l, layers)| layers.iter().map(move |_| 3 - l));
         let levels = enc.chain(dec).chain(std::iter::once(0));
-        self.conv_shapes()
+        let convs: u64 = self
+            .conv_shapes()
             .iter()
             .zip(levels)
             .map(|(s, level)| {
                 let pixels = ((height >> level) * (width >> level)) as u64;
                 (s.in_channels * s.out_channels * 9) as u64 * pixels
             })
-            .sum()
+            .sum();
+        let filter = match self.head {
+            Head::Direct => 0,
+            Head::Kernel { size } => (size * size * 3 * height * width) as u64,
+        };
+        convs + filter
     }
 
     /// The number of weights and biases.
@@ -341,15 +437,35 @@ impl UNet {
     /// Pads `x` (NCHW) with zeros at the bottom and right to multiples of [`ALIGNMENT`], runs the
     /// network and crops the output back to the input's height and width. This is what OIDN's runtime does
     /// for an image that fits one tile: the image sits at the top left of a zero tile.
+    ///
+    /// A kernel head filters the unpadded input: its kernels are cropped first, so that no pixel draws on
+    /// the zero padding.
     pub fn forward_padded(&self, x: &Tensor) -> Result<Tensor> {
         let (_, _, h, w) = x.dims4()?;
-        let y = self.forward(&pad_to_multiple(x, ALIGNMENT)?)?;
-        crop(&y, h, w)
+        let y = crop(&self.trunk(&pad_to_multiple(x, ALIGNMENT)?)?, h, w)?;
+        self.apply_head(&y, x)
+    }
+
+    /// The output layer's result applied: itself for a direct network; for a kernel-predicting one, the
+    /// noisy color of `input` filtered by the kernels `y` holds as logits ([`apply_kernels`]).
+    fn apply_head(&self, y: &Tensor, input: &Tensor) -> Result<Tensor> {
+        match self.cfg.head {
+            Head::Direct => Ok(y.clone()),
+            Head::Kernel { size } => apply_kernels(y, &input.narrow(1, 0, 3)?, size),
+        }
     }
 }
 
 impl Module for UNet {
     fn forward(&self, input: &Tensor) -> Result<Tensor> {
+        let y = self.trunk(input)?;
+        self.apply_head(&y, input)
+    }
+}
+
+impl UNet {
+    /// Every layer up to and including the output layer (for a direct network, the whole forward pass).
+    fn trunk(&self, input: &Tensor) -> Result<Tensor> {
         let (_, c, h, w) = match input.dims4() {
             Ok(d) => d,
             Err(_) => bail!("UNet input must be NCHW, got shape {:?}", input.dims()),
@@ -420,7 +536,7 @@ impl UNet {
         height: usize,
         channels: usize,
     ) -> std::result::Result<Result<Vec<f32>>, Vec<f32>> {
-        if !self.weights_run_direct() {
+        if !self.weights_run_direct() || !self.cfg.head.is_direct() {
             return Err(input);
         }
         Ok((|| {
@@ -479,6 +595,42 @@ impl UNet {
         let out = layer(&self.out, &[inputs(&self.out)?])?;
         Ok(direct::Plan { enc, dec, out, skips: self.skips })
     }
+}
+
+/// Kernel prediction's filtering: per pixel, the softmax of the `size²` logits of `logits` (`N × size² × H ×
+/// W`, row-major offsets from `(−r, −r)` to `(r, r)`, `r = size / 2`) weights the `size × size`
+/// neighbourhood of `color` (`N × C × H × W`; outside the image, the nearest edge pixel). Differentiable in
+/// both.
+pub fn apply_kernels(logits: &Tensor, color: &Tensor, size: usize) -> Result<Tensor> {
+    let (n, k, h, w) = logits.dims4()?;
+    let (cn, _, ch, cw) = color.dims4()?;
+    if k != size * size || (cn, ch, cw) != (n, h, w) {
+        bail!(
+            "apply_kernels: {size}×{size} kernels need {} logits per pixel of a {n}×{h}×{w} color; got logits {:?} \
+             and color {:?}",
+            size * size,
+            logits.dims(),
+            color.dims()
+        )
+    }
+    // The softmax, shifted by the maximum (detached: the shift changes no weight, so no gradient flows
+    // through it).
+    let shifted = logits.broadcast_sub(&logits.max_keepdim(1)?.detach())?.exp()?;
+    let weights = shifted.broadcast_div(&shifted.sum_keepdim(1)?)?;
+    let r = size / 2;
+    let padded = color.pad_with_same(2, r, r)?.pad_with_same(3, r, r)?;
+    let mut out: Option<Tensor> = None;
+    for dy in 0..size {
+        let rows = padded.narrow(2, dy, h)?;
+        for dx in 0..size {
+            let term = rows.narrow(3, dx, w)?.broadcast_mul(&weights.narrow(1, dy * size + dx, 1)?)?;
+            out = Some(match out {
+                Some(acc) => (acc + term)?,
+                None => term,
+            });
+        }
+    }
+    Ok(out.expect("a kernel has at least one tap"))
 }
 
 /// Pads an NCHW tensor with zeros at the bottom and right so that H and W are multiples of `multiple`.

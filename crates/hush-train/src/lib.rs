@@ -28,7 +28,7 @@
 //! let samples = vec![TrainSample { input, target }];
 //!
 //! let mut cfg = TrainConfig::thesis(InputFeatures::default());
-//! cfg.net = UNetConfig { kind: UNetKind::Unet, in_channels: 3, out_channels: 3, width: 0.25 }.into();
+//! cfg.net = UNetConfig::new(UNetKind::Unet, 3, 0.25).into();
 //! (cfg.steps, cfg.batch, cfg.crop) = (2, 1, 16);
 //! let trained = train(&cfg, &samples, &[], &candle_core::Device::Cpu, Start::Fresh, |report| {
 //!     println!("step {} loss {:.4}", report.row.step, report.row.loss);

@@ -155,7 +155,10 @@ pub fn train(
                     "initial weights were given, but the configuration does not record them (set `init`)".into(),
                 ));
             }
-            let adapted = weights.adapt(&cfg.features).map_err(|e| TrainError::Config(e.to_string()))?;
+            let adapted = weights
+                .adapt(&cfg.features)
+                .and_then(|w| w.with_head(cfg.net.head()))
+                .map_err(|e| TrainError::Config(e.to_string()))?;
             if adapted.info.net != cfg.net || adapted.info.transfer != cfg.transfer {
                 return Err(TrainError::Config(format!(
                     "the initial weights are a {} with the {:?} transfer, the configuration asks for a {} with {:?}",

@@ -75,7 +75,7 @@ impl NetArgs {
             bail!("unknown --kind {:?}; known: unet, unet_small, unet_large, autoencoder", self.kind)
         };
         let features = InputFeatures::parse(&self.features)?;
-        let net = UNetConfig { kind, in_channels: features.in_channels(), out_channels: 3, width: self.width };
+        let net = UNetConfig::new(kind, features.in_channels(), self.width);
         let info = ModelInfo { net: net.into(), features, transfer: Transfer::Pu };
         info.validate()?;
         self.check_counts()?;

@@ -17,6 +17,7 @@ const TRAIN_KEYS: &[&str] = &[
     "features",
     "spp",
     "arch",
+    "head",
     "width",
     "loss",
     "loss-space",

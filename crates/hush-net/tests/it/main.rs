@@ -2,6 +2,7 @@
 //! seconds on the CPU.
 
 mod input;
+mod kernel;
 mod loss;
 mod transfer;
 mod tza;

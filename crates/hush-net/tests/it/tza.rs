@@ -47,7 +47,7 @@ fn official_weights_kind_and_features_are_inferred() -> Result<()> {
     ];
     for (name, kind, in_channels, aux) in cases {
         let (net, info) = load_tza(&official(name), None, &Device::Cpu)?;
-        assert_eq!(info.net, UNetConfig { kind, in_channels, out_channels: 3, width: 1.0 }.into(), "{name}");
+        assert_eq!(info.net, UNetConfig::new(kind, in_channels, 1.0).into(), "{name}");
         assert_eq!(info.net.as_unet(), Some(net.config()));
         assert_eq!(info.features.aux, aux, "{name}");
     }
@@ -62,7 +62,7 @@ fn official_weights_kind_and_features_are_inferred() -> Result<()> {
 
 fn hush_net(kind: UNetKind, in_channels: usize, width: f64, seed: u64) -> Result<(VarMap, UNet)> {
     let varmap = VarMap::new();
-    let cfg = UNetConfig { kind, in_channels, out_channels: 3, width };
+    let cfg = UNetConfig::new(kind, in_channels, width);
     let net = UNet::new(VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu), &cfg)?;
     init_weights(&varmap, seed)?;
     Ok((varmap, net))

@@ -6,7 +6,7 @@ use crate::{det_tensor, max_abs_diff};
 
 fn build(in_channels: usize, width: f64) -> Result<(VarMap, UNet)> {
     let varmap = VarMap::new();
-    let cfg = UNetConfig { kind: UNetKind::Unet, in_channels, out_channels: 3, width };
+    let cfg = UNetConfig::new(UNetKind::Unet, in_channels, width);
     let net = UNet::new(VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu), &cfg)?;
     Ok((varmap, net))
 }
@@ -33,7 +33,7 @@ fn parameter_count_matches_oidn() -> Result<()> {
 #[test]
 fn width_multiplier_floors_and_keeps_one_channel() {
     let widths = |width: f64| -> Vec<usize> {
-        let cfg = UNetConfig { kind: UNetKind::Unet, in_channels: 9, out_channels: 3, width };
+        let cfg = UNetConfig::new(UNetKind::Unet, 9, width);
         cfg.conv_shapes().iter().map(|s| s.out_channels).collect()
     };
     // enc_conv0, enc_conv1, enc_conv2, ..., dec_conv1b, then dec_conv0 (always 3).
@@ -44,7 +44,7 @@ fn width_multiplier_floors_and_keeps_one_channel() {
     assert_eq!(widths(0.66)[4], 52);
     assert_eq!(widths(0.1)[4], 8);
     assert_eq!(widths(0.001), [1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 3]);
-    let cfg = |width| UNetConfig { kind: UNetKind::Unet, in_channels: 9, out_channels: 3, width };
+    let cfg = |width| UNetConfig::new(UNetKind::Unet, 9, width);
     assert!(cfg(0.0).validate().is_err());
     assert!(cfg(f64::NAN).validate().is_err());
 }
@@ -54,7 +54,7 @@ fn width_multiplier_floors_and_keeps_one_channel() {
 #[test]
 fn thesis_capacities_m1_and_m2() {
     for kind in UNetKind::ALL {
-        let at = |width| UNetConfig { kind, in_channels: 12, out_channels: 3, width }.conv_shapes();
+        let at = |width| UNetConfig::new(kind, 12, width).conv_shapes();
         let (full, m1, m2) = (at(1.0), at(THESIS_M1_WIDTH), at(THESIS_M2_WIDTH));
         for ((c, c1), c2) in full.iter().zip(&m1).zip(&m2).take(full.len() - 1) {
             let expect1 = (c.out_channels as f64 * 0.66).floor() as usize;
@@ -87,14 +87,14 @@ fn multiply_adds_match_oidn_count() {
 /// `unet_small`, 3,848,387 for `unet_large`).
 #[test]
 fn kinds_have_oidn_layers_and_parameter_counts() -> Result<()> {
-    let count = |kind, in_channels| UNetConfig { kind, in_channels, out_channels: 3, width: 1.0 }.parameter_count();
+    let count = |kind, in_channels| UNetConfig::new(kind, in_channels, 1.0).parameter_count();
     assert_eq!(count(UNetKind::Unet, 3), 914_627);
     assert_eq!(count(UNetKind::Unet, 6), 917_219);
     assert_eq!(count(UNetKind::Unet, 9), 919_811);
     assert_eq!(count(UNetKind::UnetSmall, 9), 320_035);
     assert_eq!(count(UNetKind::UnetLarge, 9), 3_848_387);
 
-    let shapes = |kind| UNetConfig { kind, in_channels: 9, out_channels: 3, width: 1.0 }.conv_shapes();
+    let shapes = |kind| UNetConfig::new(kind, 9, 1.0).conv_shapes();
     let large = shapes(UNetKind::UnetLarge);
     assert_eq!(large.len(), 19);
     assert_eq!((large[0].name, large[0].in_channels, large[0].out_channels), ("enc_conv1a", 9, 64));
@@ -125,7 +125,7 @@ fn kinds_have_oidn_layers_and_parameter_counts() -> Result<()> {
 fn every_kind_runs_and_names_its_tensors() -> Result<()> {
     for kind in UNetKind::ALL {
         let varmap = VarMap::new();
-        let cfg = UNetConfig { kind, in_channels: 6, out_channels: 3, width: 0.125 };
+        let cfg = UNetConfig::new(kind, 6, 0.125);
         let net = UNet::new(VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu), &cfg)?;
         init_weights(&varmap, 3)?;
         let y = net.forward_padded(&det_tensor(&[1, 6, 20, 24], 0.0, 1.0, 6)?)?;
@@ -171,7 +171,7 @@ fn output_shape_and_size_errors() -> Result<()> {
 fn gradients_reach_every_layer() -> Result<()> {
     for kind in UNetKind::ALL {
         let varmap = VarMap::new();
-        let cfg = UNetConfig { kind, in_channels: 9, out_channels: 3, width: 0.25 };
+        let cfg = UNetConfig::new(kind, 9, 0.25);
         let net = UNet::new(VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu), &cfg)?;
         init_weights(&varmap, 7)?;
         let x = det_tensor(&[1, 9, 32, 32], 0.0, 1.0, 5)?;
@@ -260,7 +260,7 @@ fn inference_path_matches_training_path() -> Result<()> {
     ] {
         let features = hush_net::InputFeatures::parse(features)?;
         let in_channels = features.in_channels();
-        let cfg = UNetConfig { kind, in_channels, out_channels: 3, width };
+        let cfg = UNetConfig::new(kind, in_channels, width);
         let varmap = VarMap::new();
         let trained = UNet::new(VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu), &cfg)?;
         init_weights(&varmap, 7)?;

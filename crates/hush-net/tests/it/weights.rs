@@ -10,7 +10,7 @@ use crate::{det_tensor, max_abs_diff};
 
 fn info(width: f64) -> ModelInfo {
     let features = InputFeatures::parse("alb,nrm").unwrap();
-    let net = UNetConfig { kind: UNetKind::Unet, in_channels: features.in_channels(), out_channels: 3, width };
+    let net = UNetConfig::new(UNetKind::Unet, features.in_channels(), width);
     ModelInfo { net: net.into(), features, transfer: Transfer::Pu }
 }
 

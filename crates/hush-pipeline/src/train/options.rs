@@ -5,7 +5,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use hush_dataset::AuxSource;
 use hush_net::{
-    Activation, InputFeatures, Loss, LossSpace, NetConfig, PatchMlpConfig, Pretrained, UNetConfig, UNetKind,
+    Activation, Head, InputFeatures, Loss, LossSpace, MAX_KERNEL, NetConfig, PatchMlpConfig, Pretrained, UNetConfig,
+    UNetKind,
 };
 use hush_train::{Augment, InitRecord, OptimizerConfig, Schedule, TrainConfig};
 use serde::{Deserialize, Serialize};
@@ -25,8 +26,7 @@ pub const DEFAULT_FINETUNE_LR: f64 = 1e-4;
 /// small machine: a U-Net at [`DEFAULT_WIDTH`], 64² crops, 300 steps at a learning rate of 1e-3 (the thesis's
 /// 1e-4 is for its 1270 epochs), one pass over the training images per epoch, the test loss every 10 epochs.
 pub fn defaults(features: InputFeatures) -> TrainConfig {
-    let net =
-        UNetConfig { kind: UNetKind::Unet, in_channels: features.in_channels(), out_channels: 3, width: DEFAULT_WIDTH };
+    let net = UNetConfig::new(UNetKind::Unet, features.in_channels(), DEFAULT_WIDTH);
     TrainConfig {
         net: net.into(),
         lr: 1e-3,
@@ -84,6 +84,12 @@ pub struct TrainOptions {
     /// al.'s MLP on 17×17 patches at stride 3, tanh; patch_mlp_relu with ReLU) [default: unet].
     #[cfg_attr(feature = "clap", arg(long))]
     pub arch: Option<String>,
+    /// What the U-Net's output layer predicts: direct (the denoised color, as OIDN's networks) or kernel:K
+    /// (per pixel, normalized weights of the K×K neighbourhood of the noisy color, K odd, 3 to 21: kernel
+    /// prediction, Bako et al. 2017; `kernel` is 5×5). With --init, the weights' encoder and decoder are kept
+    /// and the kernel layer starts at zero [default: direct, or the resumed run's].
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub head: Option<String>,
     /// Width multiplier of the network (1.0 = OIDN's widths; the thesis's M1 0.66, M2 0.33; for patch_mlp, of
     /// four hidden layers of 2047 units) [default: 0.25].
     #[cfg_attr(feature = "clap", arg(long))]
@@ -185,6 +191,7 @@ impl TrainOptions {
             features,
             spp,
             arch,
+            head,
             width,
             loss,
             loss_space,
@@ -247,7 +254,7 @@ impl Arch {
     /// The network of this arch for `in_channels` input channels at width multiplier `width`.
     fn config(self, in_channels: usize, width: f64) -> NetConfig {
         match self {
-            Arch::UNet(kind) => UNetConfig { kind, in_channels, out_channels: 3, width }.into(),
+            Arch::UNet(kind) => UNetConfig::new(kind, in_channels, width).into(),
             Arch::PatchMlp(activation) => PatchMlpConfig::burger(in_channels, width, activation).into(),
         }
     }
@@ -378,6 +385,25 @@ pub fn resolve_with_init(
             arch.config(features.in_channels(), width.or(base_width).unwrap_or(DEFAULT_WIDTH))
         }
     };
+    let net = match &args.head {
+        Some(h) => {
+            let head = Head::parse(h).with_context(|| {
+                format!("unknown --head '{h}': use direct or kernel:K with K odd, 3 to {MAX_KERNEL}")
+            })?;
+            match &net {
+                NetConfig::UNet(c) => c.with_head(head).into(),
+                NetConfig::PatchMlp(_) if head.is_direct() => net,
+                NetConfig::PatchMlp(_) => {
+                    bail!("--head {h}: only a U-Net predicts kernels; the patch MLP predicts colors")
+                }
+            }
+        }
+        None => match &net {
+            // A new network (--arch or --width) keeps the head of the run it resumes or the weights it starts from.
+            NetConfig::UNet(c) if d.net.head() != c.head => c.with_head(d.net.head()).into(),
+            _ => net,
+        },
+    };
     let optimizer = match &args.optimizer {
         Some(o) => OptimizerConfig::parse(o)
             .with_context(|| format!("unknown --optimizer '{o}': use adam, adamw, sgd or sgd_momentum"))?,
@@ -449,7 +475,10 @@ pub fn resolve_with_init(
     };
     if let Some((weights, record)) = &init {
         // The network is the one the weights are; --arch and --width may only repeat it.
-        let adapted = weights.adapt(&train.features).with_context(|| format!("--init {}", record.source))?;
+        let adapted = weights
+            .adapt(&train.features)
+            .and_then(|w| w.with_head(train.net.head()))
+            .with_context(|| format!("--init {}", record.source))?;
         if adapted.info.net != train.net {
             bail!(
                 "--init {} holds a {}, but the options ask for a {}; drop --arch and --width to train the \
@@ -497,5 +526,34 @@ mod tests {
         assert_ne!(wider.train.net, base.train.net);
         let unet = resolve(&args("unet", None), Some(&base), 8).unwrap();
         assert!(unet.train.net.as_unet().is_some());
+    }
+
+    /// `--head kernel:K` makes the U-Net predict kernels, from OIDN's weights too (whose direct output
+    /// layer it replaces); a resumed run keeps its head, also under a new width; the patch MLP and
+    /// malformed kernels are refused naming what is allowed.
+    #[test]
+    fn the_head_option_sets_kernel_prediction() {
+        use hush_net::Head;
+        let opts = |head: Option<&str>, width: Option<f64>, init: bool| TrainOptions {
+            head: head.map(Into::into),
+            width,
+            init: init.then(|| "oidn".into()),
+            dataset: Some("ds".into()),
+            ..Default::default()
+        };
+        let head = |o: &TrainOptions, base| resolve(o, base, 8).map(|r| r.train.net.head());
+        let kpn = resolve(&opts(Some("kernel:7"), None, true), None, 8).unwrap();
+        assert_eq!(kpn.train.net.head(), Head::Kernel { size: 7 });
+        assert_eq!(kpn.train.net.as_unet().map(|c| c.width), Some(1.0), "OIDN's network, its head replaced");
+        assert_eq!(head(&opts(None, None, false), Some(&kpn)).unwrap(), Head::Kernel { size: 7 });
+        assert_eq!(head(&opts(None, Some(0.5), false), Some(&kpn)).unwrap(), Head::Kernel { size: 7 });
+        assert_eq!(head(&opts(Some("direct"), None, false), None).unwrap(), Head::Direct);
+        for bad in ["kernel:4", "kernel:23", "gaussian"] {
+            let err = format!("{:#}", resolve(&opts(Some(bad), None, false), None, 8).unwrap_err());
+            assert!(err.contains("use direct or kernel:K"), "{bad}: {err}");
+        }
+        let mlp = TrainOptions { arch: Some("patch_mlp".into()), ..opts(Some("kernel:5"), None, false) };
+        let err = format!("{:#}", resolve(&mlp, None, 8).unwrap_err());
+        assert!(err.contains("only a U-Net predicts kernels"), "{err}");
     }
 }

@@ -41,7 +41,7 @@ fn synthetic(n: usize) -> Vec<TrainSample> {
 
 fn config(steps: usize) -> TrainConfig {
     let mut cfg = TrainConfig::thesis(InputFeatures::default());
-    cfg.net = UNetConfig { kind: UNetKind::Unet, in_channels: 3, out_channels: 3, width: 0.25 }.into();
+    cfg.net = UNetConfig::new(UNetKind::Unet, 3, 0.25).into();
     cfg.steps = steps;
     cfg.batch = 4;
     cfg.crop = 32;
@@ -151,7 +151,7 @@ fn same_seed_same_losses_at_the_default_configuration() {
         })
         .collect();
     let mut cfg = TrainConfig::thesis(features);
-    cfg.net = UNetConfig { kind: UNetKind::Unet, in_channels: 9, out_channels: 3, width: 0.25 }.into();
+    cfg.net = UNetConfig::new(UNetKind::Unet, 9, 0.25).into();
     (cfg.steps, cfg.crop, cfg.lr, cfg.eval_every) = (2, 64, 1e-3, 0);
     let a = run(&cfg, &samples).unwrap();
     let b = run(&cfg, &samples).unwrap();

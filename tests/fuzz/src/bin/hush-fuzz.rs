@@ -87,7 +87,7 @@ fn write_seeds(out: &std::path::Path) {
     for (kind, in_channels) in [(UNetKind::Unet, 9), (UNetKind::Unet, 3)] {
         let varmap = VarMap::new();
         // 1/16 of OIDN's widths: the smallest whose channel counts a TZA reader infers back (2, 3, 4, 5, 6).
-        let cfg = UNetConfig { kind, in_channels, out_channels: 3, width: 0.0625 };
+        let cfg = UNetConfig::new(kind, in_channels, 0.0625);
         let net = UNet::new(VarBuilder::from_varmap(&varmap, DType::F32, &device), &cfg).unwrap();
         std::fs::write(dir("weights").join(format!("tiny-{in_channels}.tza")), hush_net::export_tza(&net).unwrap())
             .unwrap();
