@@ -277,6 +277,50 @@ fn pipeline_runs_end_to_end() {
     ]);
     assert!(err.contains("--albedo"), "{err}");
 
+    // The run's model starts one that also takes the variance and predicts 3×3 kernels: the dataset's
+    // variance files feed its training, `hush denoise` takes the render's variance, and OIDN's format
+    // refuses it.
+    let kpn = dir.join("kpn");
+    expect_success(&[
+        "train",
+        "--dataset",
+        s(&ds),
+        "--out",
+        s(&kpn),
+        "--init",
+        s(&model),
+        "--features",
+        "color,albedo,normal,variance",
+        "--head",
+        "kernel:3",
+        "--steps",
+        "1",
+        "--batch",
+        "2",
+        "--crop",
+        "32",
+    ]);
+    let config = std::fs::read_to_string(kpn.join("config.json")).unwrap();
+    assert!(config.contains(r#""kernel""#) && config.contains(r#""variance""#), "{config}");
+    let [color, albedo, normal, variance] =
+        ["000002.hdr", "ref.alb", "ref.nrm", "000002.var"].map(|f| ds.join(format!("cbox_v001_{f}.exr")));
+    let kpn_model = kpn.join("model.safetensors");
+    let with = |variance_too: bool| {
+        let mut args = vec!["denoise", "--model", s(&kpn_model), "--color", s(&color), "--out", s(&out)];
+        args.extend(["--albedo", s(&albedo), "--normal", s(&normal)]);
+        if variance_too {
+            args.extend(["--variance", s(&variance)]);
+        }
+        args
+    };
+    expect_success(&with(true));
+    let denoised = hush_dataset::read_rgb(&out).unwrap();
+    assert_eq!((denoised.width, denoised.height, denoised.count_non_finite()), (32, 32, 0));
+    let err = expect_error(&with(false));
+    assert!(err.contains("--variance"), "{err}");
+    let err = expect_error(&["export", "--model", s(&kpn_model), "--out", s(&dir.join("kpn.tza"))]);
+    assert!(err.contains("kernel"), "{err}");
+
     let report = dir.join("report");
     let eval = ["eval", "--dataset", s(&ds), "--model", s(&model), "--out", s(&report), "--timing-runs", "1"];
     let err = expect_error(&[&eval[..], &["--baseline", "noisy,no-such-filter"]].concat());

@@ -184,6 +184,9 @@ pub struct ViewImages {
     pub diffuse: Image,
     pub specular: Image,
     pub reference: Image,
+    /// The variance of the noisy render's pixel values, where the dataset stores it (renders made before
+    /// hush wrote variance files have none).
+    pub variance: Option<Image>,
 }
 
 /// Loads the noisy render at `spp`, the auxiliary images `aux` names and the reference of `view` from `root`.
@@ -217,8 +220,9 @@ pub fn load_view(root: impl AsRef<Path>, view: &ViewRecord, spp: u32, aux: AuxSo
         },
     };
     let files = [noisy.file.as_str(), features[0], features[1], features[2], features[3], view.reference.file.as_str()];
+    let files: Vec<&str> = files.into_iter().chain(noisy.variance.as_deref()).collect();
     let mut images = Vec::with_capacity(files.len());
-    for file in files {
+    for &file in &files {
         let path = layout.path(file);
         let image = read_rgb(&path)?;
         if image.channels != 3 {
@@ -252,5 +256,6 @@ pub fn load_view(root: impl AsRef<Path>, view: &ViewRecord, spp: u32, aux: AuxSo
         diffuse: next(),
         specular: next(),
         reference: next(),
+        variance: it.next(),
     })
 }

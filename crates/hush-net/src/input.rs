@@ -7,7 +7,11 @@
 //!   clamps only to [0, FLT_MAX] before the transfer, so radiance above 65504 / exposure reaches the
 //!   network as values > 1, and hush must do the same to reproduce OIDN's output with OIDN's weights;
 //! * albedo-like features (albedo, diffuse, specular reflectance): sanitized, clamped to [0, 1];
-//! * normals: sanitized, clamped to [-1, 1], then mapped to [0, 1] by `n · 0.5 + 0.5`.
+//! * normals: sanitized, clamped to [-1, 1], then mapped to [0, 1] by `n · 0.5 + 0.5`;
+//! * the color's variance (per pixel and channel, the variance of the pixel's value: its samples'
+//!   variance over their count, as `hush render` writes it): sanitized, its square root (the standard
+//!   error, in radiance) × exposure through the color's transfer function, clamped to [0, 1], so the
+//!   network sees the noise's size in the units it sees the color in. Not an OIDN input.
 //!
 //! **Non-finite input** (the sanitization policy): NaN, +Inf and −Inf samples become 0, as do negative
 //! color samples, in every feature, before anything else; [`crate::transfer::autoexposure`] ignores them
@@ -35,28 +39,34 @@ pub enum Feature {
     Diffuse,
     /// Specular reflectance k_s at the first non-specular hit (thesis §6.2).
     Specular,
+    /// The variance of the noisy color's pixel values (of its samples, over their count): where the noise
+    /// is, which one noisy image cannot tell a network (Bako et al. 2017; thesis §9).
+    Variance,
 }
 
 impl Feature {
-    pub const ALL: [Feature; 4] = [Feature::Albedo, Feature::Normal, Feature::Diffuse, Feature::Specular];
+    pub const ALL: [Feature; 5] =
+        [Feature::Albedo, Feature::Normal, Feature::Diffuse, Feature::Specular, Feature::Variance];
 
-    /// The short name used in file names and feature lists: `alb`, `nrm`, `diff`, `spec`.
+    /// The short name used in file names and feature lists: `alb`, `nrm`, `diff`, `spec`, `var`.
     pub fn short_name(self) -> &'static str {
         match self {
             Feature::Albedo => "alb",
             Feature::Normal => "nrm",
             Feature::Diffuse => "diff",
             Feature::Specular => "spec",
+            Feature::Variance => "var",
         }
     }
 
-    /// The long name, as serialized: `albedo`, `normal`, `diffuse`, `specular`.
+    /// The long name, as serialized: `albedo`, `normal`, `diffuse`, `specular`, `variance`.
     pub fn long_name(self) -> &'static str {
         match self {
             Feature::Albedo => "albedo",
             Feature::Normal => "normal",
             Feature::Diffuse => "diffuse",
             Feature::Specular => "specular",
+            Feature::Variance => "variance",
         }
     }
 
@@ -65,12 +75,14 @@ impl Feature {
         Feature::ALL.into_iter().find(|f| name == f.short_name() || name == f.long_name())
     }
 
-    /// The network's view of one feature sample.
-    fn prepare(self, v: f32) -> f32 {
+    /// The network's view of one feature sample (the module docs), with the color's `exposure` and
+    /// `transfer`.
+    fn prepare(self, v: f32, exposure: f32, transfer: Transfer) -> f32 {
         let v = sanitize(v);
         match self {
             Feature::Normal => v.clamp(-1.0, 1.0) * 0.5 + 0.5,
             Feature::Albedo | Feature::Diffuse | Feature::Specular => v.clamp(0.0, 1.0),
+            Feature::Variance => prepare_color_unclamped(v.max(0.0).sqrt(), exposure, transfer).min(1.0),
         }
     }
 }
@@ -100,7 +112,7 @@ impl InputFeatures {
         {
             match Feature::parse(name) {
                 Some(f) => aux.push(f),
-                None => bail!("unknown feature {name:?}; known: alb, nrm, diff, spec"),
+                None => bail!("unknown feature {name:?}; known: alb, nrm, diff, spec, var"),
             }
         }
         InputFeatures::new(aux)
@@ -230,7 +242,7 @@ fn build(
     for p in 0..width * height {
         out.extend_from_slice(&color[3 * p..3 * p + 3]);
         for (f, a) in features.aux.iter().zip(aux) {
-            out.extend(a[3 * p..3 * p + 3].iter().map(|&v| f.prepare(v)));
+            out.extend(a[3 * p..3 * p + 3].iter().map(|&v| f.prepare(v, exposure, transfer)));
         }
     }
     Ok(out)

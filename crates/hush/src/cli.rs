@@ -168,6 +168,10 @@ pub struct DenoiseArgs {
     pub diffuse: Option<PathBuf>,
     #[arg(long)]
     pub specular: Option<PathBuf>,
+    /// The color's per-pixel variance (for models trained with the `variance` feature; a `hush render` EXR
+    /// carries it as its `variance` layer).
+    #[arg(long)]
+    pub variance: Option<PathBuf>,
     /// Output EXR (R,G,B), or PFM where the name ends in `.pfm`.
     #[arg(long)]
     pub out: PathBuf,

@@ -38,6 +38,7 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
         Feature::Normal => &args.normal,
         Feature::Diffuse => &args.diffuse,
         Feature::Specular => &args.specular,
+        Feature::Variance => &args.variance,
     };
     let has_layer = |f: Feature| {
         exr.as_ref().is_some_and(|exr| exr.channels.keys().any(|k| k.starts_with(&format!("{}.", layer_name(f)))))

@@ -20,6 +20,15 @@ pub fn run(args: ExportArgs) -> Result<()> {
     let (net, info) = hush_net::load_model(&bytes, &candle_core::Device::Cpu)
         .with_context(|| format!("loading model {}", args.model.display()))?;
     let tza = net.export_tza().with_context(|| format!("exporting {}", args.model.display()))?;
+    // OIDN's runtime tells a TZA's inputs by their count alone: color, albedo, normal in that order.
+    if hush_net::oidn_features(info.net.in_channels()).ok().as_ref() != Some(&info.features) {
+        anyhow::bail!(
+            "exporting {}: OIDN's runtime takes color, albedo and normal (hdr, hdr,alb or hdr,alb,nrm), and this \
+             model takes {}; use its .safetensors file with `hush denoise` or `hush eval` instead",
+            args.model.display(),
+            info.features
+        );
+    }
     hush_dataset::write_atomic(&args.out, |tmp| std::fs::write(tmp, &tza))
         .with_context(|| format!("writing {}", args.out.display()))?;
     eprintln!(

@@ -138,6 +138,19 @@ fn load_view_reads_all_images() {
     let err = load_view(dir.path(), &view, 32, AuxSource::Noisy).unwrap_err().to_string();
     assert!(err.contains("32 spp") && err.contains("[4, 16]"), "{err}");
 
+    // A render's variance is read where the manifest records one, with either auxiliary source.
+    assert_eq!(own.variance, None);
+    let mut with_variance = view.clone();
+    let name = Layout::noisy_variance_name("cbox", "v0", 16);
+    write_rgb(dir.join(&name), &ramp(8, 8, 3, 21.0)).unwrap();
+    with_variance.noisy[1].variance = Some(name.clone());
+    for aux in [AuxSource::Noisy, AuxSource::Clean] {
+        assert_eq!(load_view(dir.path(), &with_variance, 16, aux).unwrap().variance, Some(ramp(8, 8, 3, 21.0)));
+    }
+    std::fs::remove_file(dir.join(&name)).unwrap();
+    let err = load_view(dir.path(), &with_variance, 16, AuxSource::Noisy).unwrap_err().to_string();
+    assert!(err.contains(&name), "{err}");
+
     // A dataset from before the renders' own features were stored: clean ones only, and a clear error.
     let mut old = view.clone();
     old.noisy.iter_mut().for_each(|r| r.aux = None);

@@ -56,6 +56,27 @@ fn build_input_prepares_each_feature_like_oidn() {
     assert!(build_input(&features, 2, 1, &color, &[&normal, &diffuse], 0.0, Transfer::Pu).is_err());
 }
 
+/// The variance feature is the standard error (the square root of the pixel's variance) × exposure through
+/// the color's transfer, clamped to [0, 1]: what the network sees of the color's noise, in the color's
+/// units. Zero stays zero, NaN and negatives become 0, an overflowed variance (f32::MAX) 1; it is the same
+/// for training and inference, whose color clamps differ.
+#[test]
+fn the_variance_feature_is_the_standard_error_in_the_colors_space() {
+    let features = InputFeatures::parse("var").unwrap();
+    assert_eq!(features.to_string(), "hdr,var");
+    assert_eq!(InputFeatures::parse("color,variance").unwrap(), features);
+    let color = [0.5f32; 6];
+    let variance = [0.0, 0.09, 4.0, f32::NAN, -1.0, f32::MAX];
+    let want = [0.0, pu_forward(2.0 * 0.3), pu_forward(2.0 * 2.0), 0.0, 0.0, 1.0];
+    for build in [build_input, hush_net::build_inference_input] {
+        let x = build(&features, 2, 1, &color, &[&variance], 2.0, Transfer::Pu).unwrap();
+        let got = [x[3], x[4], x[5], x[9], x[10], x[11]];
+        for (g, w) in got.iter().zip(&want) {
+            assert!((g - w).abs() < 1e-6, "{got:?} against {want:?}");
+        }
+    }
+}
+
 #[test]
 fn finish_color_inverts_prepare_color() {
     let rgb = [0.0f32, 1e-4, 0.01, 0.5, 3.0, 1000.0];

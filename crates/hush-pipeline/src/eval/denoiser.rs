@@ -6,14 +6,19 @@ use anyhow::{Context, Result, bail};
 use hush_dataset::Image;
 use hush_net::{Feature, ModelInfo, Net, load_model, load_tza};
 
-/// The auxiliary image of a dataset view for one feature.
-pub fn aux_of(view: &hush_dataset::ViewImages, f: Feature) -> &Image {
-    match f {
+/// The auxiliary image of a dataset view for one feature. Fails for the variance where the dataset stores
+/// none for that render (it was rendered before hush wrote variance files).
+pub fn aux_of(view: &hush_dataset::ViewImages, f: Feature) -> Result<&Image> {
+    Ok(match f {
         Feature::Albedo => &view.albedo,
         Feature::Normal => &view.normal,
         Feature::Diffuse => &view.diffuse,
         Feature::Specular => &view.specular,
-    }
+        Feature::Variance => view.variance.as_ref().context(
+            "the dataset stores no variance for this render (it was rendered before hush wrote variance files): \
+             render the dataset again into a new folder, or train without the variance feature",
+        )?,
+    })
 }
 
 /// A trained model (a hush model or OIDN weights) and what it expects.

@@ -113,7 +113,7 @@ impl Method for Model {
     }
 
     fn run(&self, images: &ViewImages, timing_runs: usize) -> Result<Run> {
-        let aux: Vec<&Image> = self.denoiser.features().iter().map(|&f| aux_of(images, f)).collect();
+        let aux = self.denoiser.features().iter().map(|&f| aux_of(images, f)).collect::<Result<Vec<&Image>>>()?;
         let (image, seconds) = timed(timing_runs, || self.denoiser.denoise(&images.color, &aux))?;
         Ok(Run::Done(image, Some(seconds)))
     }

@@ -57,7 +57,11 @@ pub(crate) fn load_split(
         let mut samples = Vec::new();
         for &(view, spp) in &records {
             let images = load_view(&cfg.dataset, view, spp, cfg.aux)?;
-            let aux: Vec<&Image> = features.aux.iter().map(|&f| aux_of(&images, f)).collect();
+            let aux = features
+                .aux
+                .iter()
+                .map(|&f| aux_of(&images, f).with_context(|| format!("{}_{} at {spp} spp", view.scene, view.view)))
+                .collect::<Result<Vec<&Image>>>()?;
             samples.push(TrainSample::from_linear(features, Transfer::Pu, &images.color, &aux, &images.reference)?);
         }
         Ok(samples)
