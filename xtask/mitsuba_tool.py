@@ -3,7 +3,8 @@
 
 
   check   render a scene at low spp and compare its mean with a reference render
-  bench   M samples per CPU-second and relMSE x CPU-seconds of Mitsuba's llvm_ad_rgb variant
+  bench   M samples per CPU-second and relMSE x CPU-seconds of Mitsuba's llvm_ad_rgb variant (--variant
+          cuda_ad_rgb on an NVIDIA GPU, where M samples per wall second is the figure)
           (--width/--height/--max-depth set as hush's flags do, see load_scene)
   relmse  relMSE of any RGB EXR (e.g. hush's render) against a reference EXR
 
@@ -226,6 +227,7 @@ def cmd_relmse(a):
 
 
 def main():
+    global VARIANT
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="cmd", required=True)
     c = sub.add_parser("check")
@@ -245,10 +247,12 @@ def main():
     b.add_argument("--ref")
     b.add_argument("--out")
     b.add_argument("--stats")
+    b.add_argument("--variant", default=VARIANT, help="Mitsuba's variant, e.g. cuda_ad_rgb on an NVIDIA GPU")
     r = sub.add_parser("relmse")
     r.add_argument("--image", required=True)
     r.add_argument("--ref", required=True)
     a = p.parse_args()
+    VARIANT = getattr(a, "variant", VARIANT)
     {"check": cmd_check, "bench": cmd_bench, "relmse": cmd_relmse}[a.cmd](a)
 
 

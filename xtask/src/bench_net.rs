@@ -19,7 +19,7 @@ use crate::bench::{flags, ratio};
 use crate::util::{Result, build_hush, ensure_vulkan, load_average, output, project_root, spawn, target_dir};
 use crate::util::{read_json, write_json};
 
-fn hush_json(hush: &Path, threads: Option<usize>, args: &[&str]) -> Result<serde_json::Value> {
+pub(crate) fn hush_json(hush: &Path, threads: Option<usize>, args: &[&str]) -> Result<serde_json::Value> {
     let mut cmd = Command::new(hush);
     cmd.arg("bench").args(args);
     if let Some(t) = threads {
@@ -65,7 +65,7 @@ const MODELS: [(&str, &str, bool); 3] = [
 ];
 
 /// Runs the helper (with `LD_LIBRARY_PATH` for OIDN's tools, which its children inherit); its JSON.
-fn helper(python: &Path, ld_path: &str, args: &[&str]) -> Result<serde_json::Value> {
+pub(crate) fn helper(python: &Path, ld_path: &str, args: &[&str]) -> Result<serde_json::Value> {
     let text = output(Command::new(python).env("LD_LIBRARY_PATH", ld_path).args(["-c", HELPER]).args(args))?;
     if text.trim().is_empty() {
         return Ok(serde_json::Value::Null);
@@ -73,14 +73,14 @@ fn helper(python: &Path, ld_path: &str, args: &[&str]) -> Result<serde_json::Val
     serde_json::from_str(text.trim()).map_err(|e| format!("the timing helper printed no JSON: {e}"))
 }
 
-fn median(xs: &[f64]) -> Option<f64> {
+pub(crate) fn median(xs: &[f64]) -> Option<f64> {
     let mut v: Vec<f64> = xs.iter().copied().filter(|x| x.is_finite()).collect();
     v.sort_by(f64::total_cmp);
     v.get(v.len() / 2).copied()
 }
 
 /// `oidnDenoise`'s per-execution times (`msec=` after each "Denoising" at `-v 2`), warm-up dropped.
-fn oidn_warm_seconds(text: &str) -> Vec<f64> {
+pub(crate) fn oidn_warm_seconds(text: &str) -> Vec<f64> {
     let times: Vec<f64> = text
         .lines()
         .filter_map(|l| l.trim().strip_prefix("msec="))

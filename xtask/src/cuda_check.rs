@@ -93,7 +93,7 @@ fn toolkit_root(venv: &Path) -> Result<PathBuf> {
 
 /// Installs the pinned wheels unless they are there already, checks that their nvcc runs and is the expected
 /// release, and returns the toolkit folder.
-fn ensure_toolkit() -> Result<PathBuf> {
+pub(crate) fn ensure_toolkit() -> Result<PathBuf> {
     let venv = venv_dir();
     let installed = std::fs::read_to_string(marker()).is_ok_and(|t| t == marker_text());
     if installed

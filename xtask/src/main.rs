@@ -11,6 +11,7 @@ mod demo;
 mod eval;
 mod faults;
 mod fuzz;
+mod gpu_check;
 mod hostile;
 mod mitsuba;
 mod procedural;
@@ -79,6 +80,10 @@ tasks:
   cuda-check                 check that the `cuda` feature compiles (hush, hush-net, hush-train, all targets)
                              with NVIDIA's nvcc from PyPI in target/cuda-venv, into target/cuda-check; no GPU
                              needed (heavy: 10 to 12 minutes cold on 2 cores; run by hand before releases)
+  gpu-check                  on a machine with an NVIDIA GPU: build with cuda, check that wgpu renders on the GPU,
+                             render, fine-tune and denoise there, each against the CPU path and the GPU peers
+                             (Mitsuba 3 cuda_ad_rgb, OIDN's CUDA device); target/gpu-check/gpu-check.json.
+                             Elsewhere it stops at once saying that no GPU is present
 ";
 
 fn main() -> ExitCode {
@@ -95,6 +100,7 @@ fn main() -> ExitCode {
         Some("train-check") => train_check::run(&args[1..]),
         Some("train-default") => train_default::run(&args[1..]),
         Some("cuda-check") => cuda_check::run(&args[1..]),
+        Some("gpu-check") => gpu_check::run(&args[1..]),
         Some("fuzz") => fuzz::run(&args[1..]),
         Some("hostile") => hostile::run(&args[1..]),
         Some("faults") => faults::run(&args[1..]),

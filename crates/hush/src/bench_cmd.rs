@@ -24,6 +24,9 @@ use hush_pipeline::process::{cpu_seconds, peak_rss_bytes};
 pub struct BenchArgs {
     #[command(subcommand)]
     pub what: BenchWhat,
+    /// Where the network runs: cpu or cuda [default: cuda when hush is built with it, else cpu].
+    #[arg(long, global = true)]
+    pub device: Option<String>,
 }
 
 #[derive(Subcommand, Debug)]
@@ -132,7 +135,7 @@ fn threads() -> serde_json::Value {
 }
 
 pub fn run(args: BenchArgs) -> Result<()> {
-    let device = hush_pipeline::device(None)?;
+    let device = hush_pipeline::device(args.device.as_deref())?;
     let json = match args.what {
         BenchWhat::Inference(a) => inference(&a, &device)?,
         BenchWhat::TrainStep(a) => train_step(&a, &device)?,
@@ -155,11 +158,11 @@ fn inference(a: &NetArgs, device: &Device) -> Result<serde_json::Value> {
     // Loaded from weight bytes as `hush denoise` loads a model: plain tensors, not training variables,
     // whose ops would record the graph and keep every activation alive until the output is dropped.
     let denoiser = match &a.weights {
-        Some(path) => hush_pipeline::Denoiser::load(path)?,
+        Some(path) => hush_pipeline::Denoiser::load_on(path, device)?,
         None => {
             let info = a.info()?;
             let (varmap, _) = new_net(&info, device)?;
-            hush_pipeline::Denoiser::from_bytes(&hush_net::save_weights(&varmap, &info)?, false)?
+            hush_pipeline::Denoiser::from_bytes_on(&hush_net::save_weights(&varmap, &info)?, false, device)?
         }
     };
     let info = denoiser.info.clone();
@@ -201,6 +204,8 @@ fn train_step(a: &NetArgs, device: &Device) -> Result<serde_json::Value> {
         let l = loss.compute(&out, &y)?;
         let grads = l.backward()?;
         opt.step(&grads, 1e-4, 1.0)?;
+        // A GPU runs the step asynchronously: the time is the step's only once it has finished.
+        device.synchronize()?;
         Ok(())
     })?;
     let padded = a.size.div_ceil(hush_net::ALIGNMENT) * hush_net::ALIGNMENT;

@@ -175,6 +175,9 @@ pub struct DenoiseArgs {
     /// Output EXR (R,G,B), or PFM where the name ends in `.pfm`.
     #[arg(long)]
     pub out: PathBuf,
+    /// Where the network runs: cpu or cuda [default: cuda when hush is built with it, else cpu].
+    #[arg(long)]
+    pub device: Option<String>,
 }
 
 #[derive(Args, Debug)]

@@ -43,8 +43,9 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
     let has_layer = |f: Feature| {
         exr.as_ref().is_some_and(|exr| exr.channels.keys().any(|k| k.starts_with(&format!("{}.", layer_name(f)))))
     };
+    let device = hush_pipeline::device(args.device.as_deref())?;
     let (model, model_name) = match &args.model {
-        Some(path) => (Denoiser::load(path)?, path.display().to_string()),
+        Some(path) => (Denoiser::load_on(path, &device)?, path.display().to_string()),
         None => {
             // Until a hush model beats OIDN's on held-out scenes (`cargo xtask train-default` measures it),
             // the default is OIDN's official weights for the features at hand, built in (OIDN takes a normal
@@ -57,7 +58,7 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
             };
             let weights = official_for(&InputFeatures { aux: features });
             eprintln!("model: {} (built in; --model to choose another)", weights.method_name());
-            (Denoiser::official(&weights)?, weights.method_name())
+            (Denoiser::official_on(&weights, &device)?, weights.method_name())
         }
     };
     for f in Feature::ALL.into_iter().filter(|f| given(*f).is_some() && !model.features().contains(f)) {

@@ -3,6 +3,7 @@
 use std::path::Path;
 
 use anyhow::{Context, Result, bail};
+use candle_core::Device;
 use hush_dataset::Image;
 use hush_net::{Feature, ModelInfo, Net, load_model, load_tza};
 
@@ -34,26 +35,39 @@ impl Denoiser {
     /// color only, 6 color + albedo, 9 color + albedo + normal; the network kind comes from its tensor names and
     /// shapes.
     pub fn load(path: &Path) -> Result<Denoiser> {
+        Denoiser::load_on(path, &crate::device(None)?)
+    }
+
+    /// [`Self::load`] onto `device`.
+    pub fn load_on(path: &Path, device: &Device) -> Result<Denoiser> {
         let bytes = crate::read_weight_file(path).with_context(|| format!("reading model {}", path.display()))?;
         let is_tza = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("tza"));
-        Denoiser::from_bytes(&bytes, is_tza).with_context(|| format!("loading model {}", path.display()))
+        Denoiser::from_bytes_on(&bytes, is_tza, device).with_context(|| format!("loading model {}", path.display()))
     }
 
     /// [`Self::load`] of a file's bytes: TZA where `is_tza`, else a hush safetensors model.
     pub fn from_bytes(bytes: &[u8], is_tza: bool) -> Result<Denoiser> {
-        let device = crate::device(None)?;
+        Denoiser::from_bytes_on(bytes, is_tza, &crate::device(None)?)
+    }
+
+    /// [`Self::from_bytes`] onto `device`.
+    pub fn from_bytes_on(bytes: &[u8], is_tza: bool, device: &Device) -> Result<Denoiser> {
         let (net, info) = if is_tza {
-            load_tza(bytes, None, &device).map(|(net, info)| (Net::from(net), info))?
+            load_tza(bytes, None, device).map(|(net, info)| (Net::from(net), info))?
         } else {
-            load_model(bytes, &device)?
+            load_model(bytes, device)?
         };
         Ok(Denoiser { net, info })
     }
 
     /// OIDN's official weights built into hush ([`crate::official`]).
     pub fn official(weights: &crate::official::OfficialWeights) -> Result<Denoiser> {
-        let device = crate::device(None)?;
-        let (net, info) = load_tza(weights.bytes, Some(weights.features()), &device)
+        Denoiser::official_on(weights, &crate::device(None)?)
+    }
+
+    /// [`Self::official`] onto `device`.
+    pub fn official_on(weights: &crate::official::OfficialWeights, device: &Device) -> Result<Denoiser> {
+        let (net, info) = load_tza(weights.bytes, Some(weights.features()), device)
             .with_context(|| format!("loading the built-in {}", weights.method_name()))?;
         Ok(Denoiser { net: Net::from(net), info })
     }
