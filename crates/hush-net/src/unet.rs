@@ -603,7 +603,7 @@ impl UNet {
 /// both.
 pub fn apply_kernels(logits: &Tensor, color: &Tensor, size: usize) -> Result<Tensor> {
     let (n, k, h, w) = logits.dims4()?;
-    let (cn, _, ch, cw) = color.dims4()?;
+    let (cn, c, ch, cw) = color.dims4()?;
     if k != size * size || (cn, ch, cw) != (n, h, w) {
         bail!(
             "apply_kernels: {size}×{size} kernels need {} logits per pixel of a {n}×{h}×{w} color; got logits {:?} \
@@ -620,14 +620,33 @@ pub fn apply_kernels(logits: &Tensor, color: &Tensor, size: usize) -> Result<Ten
     let r = size / 2;
     let padded = color.pad_with_same(2, r, r)?.pad_with_same(3, r, r)?;
     let mut out: Option<Tensor> = None;
+    let mut add = |term: Tensor| -> Result<()> {
+        out = Some(match out.take() {
+            Some(acc) => (acc + term)?,
+            None => term,
+        });
+        Ok(())
+    };
+    if weights.track_op() {
+        // Training: per color channel, its `size²` shifted copies side by side (`N × size² × H × W`,
+        // contiguous) times the weights, summed over the taps. The weights are never sliced, so their
+        // gradient is one product per channel rather than one zero-padded tensor per tap.
+        let channels = (0..c)
+            .map(|ch| {
+                let plane = padded.narrow(1, ch, 1)?;
+                let taps = (0..size * size)
+                    .map(|t| plane.narrow(2, t / size, h)?.narrow(3, t % size, w))
+                    .collect::<Result<Vec<_>>>()?;
+                (Tensor::cat(&taps, 1)? * &weights)?.sum_keepdim(1)
+            })
+            .collect::<Result<Vec<_>>>()?;
+        return Tensor::cat(&channels, 1);
+    }
+    // Inference: tap by tap, in the memory of a few images.
     for dy in 0..size {
         let rows = padded.narrow(2, dy, h)?;
         for dx in 0..size {
-            let term = rows.narrow(3, dx, w)?.broadcast_mul(&weights.narrow(1, dy * size + dx, 1)?)?;
-            out = Some(match out {
-                Some(acc) => (acc + term)?,
-                None => term,
-            });
+            add(rows.narrow(3, dx, w)?.broadcast_mul(&weights.narrow(1, dy * size + dx, 1)?)?)?;
         }
     }
     Ok(out.expect("a kernel has at least one tap"))

@@ -81,8 +81,13 @@ fn predicted_kernels_filter_the_color() -> Result<()> {
     let out = apply_kernels(&logits, &constant, size)?;
     assert!(max_abs_diff(&out, &constant)? < 1e-6, "the weights sum to one");
 
+    // Logits that record a gradient take the training path (whole channels of taps at once); it computes
+    // what the inference path (tap by tap) does.
     let var = candle_core::Var::from_tensor(&logits)?;
-    let grads = apply_kernels(var.as_tensor(), &color, size)?.sqr()?.sum_all()?.backward()?;
+    let trained = apply_kernels(var.as_tensor(), &color, size)?;
+    assert!(trained.track_op());
+    assert!(max_abs_diff(&trained, &apply_kernels(&logits, &color, size)?)? < 1e-6);
+    let grads = trained.sqr()?.sum_all()?.backward()?;
     let g = grads.get(var.as_tensor()).expect("a gradient for the logits");
     assert!(g.abs()?.sum_all()?.to_scalar::<f32>()? > 0.0);
 
