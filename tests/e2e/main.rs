@@ -961,15 +961,18 @@ fn train_starts_from_oidn_weights() {
         &[&["train", "--dataset", s(&ds), "--out", s(&dsnn), "--init", s(&oidn), "--features", "M_dsnn"][..], &common]
             .concat(),
     );
-    // `hush blend` at t = 0 is OIDN's weights: its output is OIDN's, bit for bit. Weights of other features
-    // are refused, naming both.
+    // `hush blend` at t = 0 is OIDN's weights: its output is OIDN's, bit for bit. Weights that cannot start
+    // the other model (they take a feature it drops) are refused, naming it; weights that can are first made
+    // its network, as `--init` makes them.
     let blend = dir.join("blend.safetensors");
     let model = run.join("model.safetensors");
     expect_success(&["blend", "--from", "oidn", "--to", s(&model), "--t", "0", "--out", s(&blend)]);
     assert!(denoise(&blend, "blend.exr") == theirs, "the blend at t = 0 does not denoise as OIDN's weights do");
     let dsnn_model = dsnn.join("model.safetensors");
-    let err = expect_error(&["blend", "--from", s(&model), "--to", s(&dsnn_model), "--t", "0.5", "--out", s(&blend)]);
-    assert!(err.contains("different models") && err.contains("diff,spec,nrm"), "{err}");
+    let err = expect_error(&["blend", "--from", s(&dsnn_model), "--to", s(&model), "--t", "0.5", "--out", s(&blend)]);
+    assert!(err.contains("cannot start") && err.contains("drops diffuse"), "{err}");
+    let widened = dir.join("widened.safetensors");
+    expect_success(&["blend", "--from", s(&model), "--to", s(&dsnn_model), "--t", "0.5", "--out", s(&widened)]);
     let missing = dir.join("missing.tza");
     let err = expect_error(&["blend", "--from", s(&missing), "--to", s(&model), "--t", "0.5", "--out", s(&blend)]);
     assert!(err.contains("reading --from") && err.contains("missing.tza: no such file"), "{err}");
