@@ -44,7 +44,8 @@ pub fn claims(sweep: &str, results: &[RunResult]) -> Vec<Claim> {
                 } else {
                     Verdict::Inconclusive
                 };
-                out.push(claim(
+                let gate = r.run.group.clone();
+                out.push(g.gated(claim(
                     thesis,
                     format!(
                         "{}: best test loss {best:.4} at epoch {best_epoch} of {last_epoch}; final {last:.4} (rise {rise:+.4}, \
@@ -56,7 +57,7 @@ pub fn claims(sweep: &str, results: &[RunResult]) -> Vec<Claim> {
                         2.0 * jitter
                     ),
                     verdict,
-                ));
+                ), &[&gate]));
             }
             out
         }
@@ -125,10 +126,10 @@ pub fn claims(sweep: &str, results: &[RunResult]) -> Vec<Claim> {
                         parts.join("; ")
                     )
                 };
-                out.push(claim(
-                    &format!("Learning-rate schedules change {opt} little (figure {fig})"),
-                    measured,
-                    verdict,
+                let groups = [format!("{opt}-const"), format!("{opt}-cosine"), format!("{opt}-sgdr")];
+                out.push(g.gated(
+                    claim(&format!("Learning-rate schedules change {opt} little (figure {fig})"), measured, verdict),
+                    &groups.iter().map(String::as_str).collect::<Vec<_>>(),
                 ));
             }
             out
@@ -155,7 +156,7 @@ pub fn claims(sweep: &str, results: &[RunResult]) -> Vec<Claim> {
                     let low_gain = mean(gl.iter().copied()).unwrap_or(f64::NAN);
                     // Features that do not help at low spp leave nothing to "matter most" there.
                     let verdict = if low_gain > 0.0 { p.direction() } else { Verdict::Inconclusive };
-                    out.push(claim(
+                    out.push(g.gated(claim(
                         thesis,
                         format!(
                             "PSNR gain of ann over n: {low_gain:.3} dB at {lo} spp, {:.3} dB at {hi} spp; gain at {lo} \
@@ -164,7 +165,7 @@ pub fn claims(sweep: &str, results: &[RunResult]) -> Vec<Claim> {
                             mean(gh.iter().copied()).unwrap_or(f64::NAN)
                         ),
                         verdict,
-                    ));
+                    ), &["ann", "n"]));
                 }
                 _ => out.push(claim(thesis, "needs runs `ann`, `n` at two spp or more".into(), Verdict::NotMeasured)),
             }

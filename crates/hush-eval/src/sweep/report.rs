@@ -366,6 +366,7 @@ fn verdict(v: Verdict) -> Text {
         Verdict::Reproduced => vec![Inline::Bold("reproduced".into())],
         Verdict::Refuted => vec![Inline::Bold("refuted".into())],
         Verdict::Inconclusive => text("inconclusive"),
+        Verdict::Undertrained => text("inconclusive: undertrained"),
         Verdict::NotMeasured => text("not measured"),
     }
 }
@@ -386,7 +387,11 @@ pub fn claims_section(doc: &mut Document, claims: &[Claim]) {
          compare wall seconds per epoch, which on a shared machine are only comparable under equal load (each run's "
         )),
         code("done.json"),
-        plain(" records the load average)."),
+        plain(
+            " records the load average). Precondition: a quality claim is decided only where every run it compares \
+             beats the noisy input at every test spp (mean PSNR over the test views, spp by spp); otherwise it is \
+             inconclusive: undertrained, and says which run fell short where.",
+        ),
     ]));
     let header = ["sweep", "thesis", "measured", "verdict"].map(String::from).to_vec();
     let rows = claims.iter().map(|c| vec![text(&c.sweep), text(&c.thesis), text(&c.measured), verdict(c.verdict)]);

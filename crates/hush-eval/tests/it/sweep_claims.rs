@@ -101,3 +101,51 @@ fn overfitting_is_read_from_the_test_loss_curve() {
     let flat: Vec<_> = flat.iter().map(|&(e, tr, te)| (e, tr, te - 1e-4 * e as f64)).collect();
     assert_eq!(claims("epochs", &[result("base", &[], &flat)])[0].verdict, Verdict::Refuted);
 }
+
+/// The precondition: a quality claim whose runs do not beat the noisy input at every test spp is
+/// inconclusive (undertrained) and names the run and spp; with noisy rows below both models it is decided
+/// as before; a timing claim is decided whatever the models learned.
+#[test]
+fn claims_between_models_below_the_noisy_input_are_undertrained() {
+    let with_noisy = |mut r: RunResult, noisy: &[(u64, f64)]| {
+        let rows: Vec<EvalRow> = noisy
+            .iter()
+            .enumerate()
+            .map(|(i, &(spp, p))| EvalRow {
+                view: format!("v{}", i / 2),
+                method: "noisy".into(),
+                spp,
+                psnr: Some(p),
+                ..Default::default()
+            })
+            .collect();
+        r.eval.extend(rows);
+        r
+    };
+    // Two logged epochs, one second each: what the timing claim reads.
+    let epochs = |_: f64| vec![(1, 1.0, 1.0), (2, 1.0, 1.0)];
+    let psnr_n = [(4, 20.0), (64, 30.0), (4, 21.0), (64, 31.0), (4, 19.0), (64, 29.5)];
+    let psnr_ann = [(4, 23.0), (64, 30.5), (4, 24.2), (64, 31.4), (4, 21.9), (64, 30.1)];
+    // The noisy input: 15 dB at 4 spp, and at 64 spp 30.3 dB: above `n` (30.17 on average), below `ann`.
+    let noisy = [(4, 15.0), (64, 30.3), (4, 15.0), (64, 30.3), (4, 15.0), (64, 30.3)];
+    let n = with_noisy(result("n", &psnr_n, &epochs(1.0)), &noisy);
+    let ann = with_noisy(result("ann", &psnr_ann, &epochs(1.0)), &noisy);
+    let c = claims("features", &[n, ann.clone()]);
+    assert_eq!(c[0].verdict, Verdict::Undertrained, "{:?}", c[0]);
+    assert!(c[0].measured.contains("`n` (seed 0) at 64 spp: 30.17 dB against the noisy 30.30"), "{}", c[0].measured);
+    assert_eq!(c[2].verdict, Verdict::Undertrained, "features at low spp compare n too: {:?}", c[2]);
+    assert_eq!(c[0].verdict.to_string(), "inconclusive: undertrained");
+    // Below both models at every spp: decided by the rule, as without noisy rows.
+    let low = [(4, 15.0), (64, 25.0), (4, 15.0), (64, 25.0), (4, 15.0), (64, 25.0)];
+    let c = claims(
+        "features",
+        &[with_noisy(result("n", &psnr_n, &[]), &low), with_noisy(result("ann", &psnr_ann, &[]), &low)],
+    );
+    assert_eq!(c[0].verdict, Verdict::Reproduced, "{:?}", c[0]);
+    // A timing claim does not depend on the models' quality.
+    let dsnn = with_noisy(result("dsnn", &psnr_ann, &epochs(1.0)), &noisy);
+    let n = with_noisy(result("n", &psnr_n, &epochs(1.0)), &noisy);
+    let c = claims("features", &[n, ann, dsnn]);
+    let timing = c.iter().find(|c| c.thesis.contains("train about equally fast")).expect("the timing claim");
+    assert_ne!(timing.verdict, Verdict::Undertrained, "{timing:?}");
+}
