@@ -14,6 +14,7 @@ pub const SCALES: [&str; 3] = ["tiny", "small", "thesis"];
 /// `hush train` options a sweep may set (the flags without `--`; `dataset`, `out` and `seed` belong to
 /// the sweep itself).
 const TRAIN_KEYS: &[&str] = &[
+    "init",
     "features",
     "spp",
     "arch",
@@ -532,7 +533,7 @@ variants = [{ name = "const", schedule = "constant" }, { name = "cosine", schedu
     fn the_repository_sweeps_parse_at_every_scale() {
         let dir = sweeps_dir();
         let names = sweep_names(&dir).unwrap();
-        for want in ["architecture", "epochs", "features", "loss", "optimizer"] {
+        for want in ["architecture", "epochs", "features", "init", "loss", "optimizer"] {
             assert!(names.iter().any(|n| n == want), "data/sweeps/{want}.toml is missing");
         }
         for scale in SCALES {

@@ -259,6 +259,14 @@ pub fn claims(sweep: &str, results: &[RunResult]) -> Vec<Claim> {
             });
             out
         }
+        "init" => vec![g.better(
+            sweep,
+            "(Not in the thesis: its toolkit could not start from trained weights.) Fine-tuning OIDN's official \
+             weights beats training the same network from scratch in the same steps",
+            "oidn",
+            "scratch",
+            Metric::Psnr,
+        )],
         _ => Vec::new(),
     }
 }
