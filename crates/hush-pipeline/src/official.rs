@@ -45,10 +45,19 @@ pub const OFFICIAL: [OfficialWeights; 3] = [
     },
 ];
 
-/// The official weights whose features are `features`; for a feature set OIDN has no weights for (the
-/// thesis's diffuse and specular), those with albedo and normal, OIDN's most informed model.
+/// The official weights whose features are `features`; for a feature set OIDN has no weights for, the most
+/// informed of those that can start a network taking it ([`hush_net::Pretrained::adapt`]): every feature
+/// of theirs is in `features`, albedo standing in for diffuse. So the thesis's diffuse + specular + normal
+/// and albedo + normal + variance get `rt_hdr_alb_nrm`, color + variance `rt_hdr`.
 pub fn official_for(features: &InputFeatures) -> OfficialWeights {
-    OFFICIAL.iter().find(|w| w.aux == features.aux.as_slice()).copied().unwrap_or(OFFICIAL[2])
+    let covered =
+        |f: &Feature| features.aux.contains(f) || (*f == Feature::Albedo && features.aux.contains(&Feature::Diffuse));
+    OFFICIAL
+        .iter()
+        .find(|w| w.aux == features.aux.as_slice())
+        .or_else(|| OFFICIAL.iter().rev().find(|w| w.aux.iter().all(covered)))
+        .copied()
+        .unwrap_or(OFFICIAL[0])
 }
 
 /// The official weights called `name` (`rt_hdr`, `rt_hdr_alb`, `rt_hdr_alb_nrm`).
@@ -72,5 +81,11 @@ mod tests {
         let dsnn = InputFeatures::parse("diff,spec,nrm").unwrap();
         assert_eq!(official_for(&dsnn).name, "rt_hdr_alb_nrm");
         assert_eq!(official_for(&InputFeatures::default()).name, "rt_hdr");
+        let name = |f: &str| official_for(&InputFeatures::parse(f).unwrap()).name;
+        assert_eq!(name("alb,nrm,var"), "rt_hdr_alb_nrm");
+        assert_eq!(name("var"), "rt_hdr", "weights with albedo cannot start a network without it");
+        assert_eq!(name("alb,var"), "rt_hdr_alb");
+        assert_eq!(name("nrm"), "rt_hdr", "OIDN takes a normal only with an albedo");
+        assert_eq!(name("diff,nrm"), "rt_hdr_alb_nrm");
     }
 }
