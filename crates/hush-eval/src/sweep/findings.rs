@@ -145,6 +145,14 @@ pub fn claims(sweep: &str, results: &[RunResult]) -> Vec<Claim> {
                     Metric::Psnr,
                 ),
             ];
+            out.push(g.better(
+                sweep,
+                "(Not in the thesis; its §9 names sample statistics as future work.) The color's per-pixel variance \
+                 as a further input improves on albedo + normal",
+                "annv",
+                "ann",
+                Metric::Psnr,
+            ));
             let spps = g.spps("ann");
             let thesis = "Auxiliary features matter most at low spp (§7.4)";
             match (spps.first(), spps.last()) {
@@ -227,6 +235,14 @@ pub fn claims(sweep: &str, results: &[RunResult]) -> Vec<Claim> {
                 "Smaller capacity trains faster (table 7.3: 0.560, 0.413, 0.321 min/epoch)",
                 measured,
                 verdict,
+            ));
+            out.push(g.better(
+                sweep,
+                "(Not in the thesis: Bako et al. 2017.) Predicting 5×5 kernels that filter the noisy color beats \
+                 predicting the color, in the same steps (each run's seconds per epoch are in the report)",
+                "kpcn",
+                "oidn",
+                Metric::Psnr,
             ));
             out.push(g.better(
                 sweep,
