@@ -69,6 +69,7 @@ pub fn write(sweep: &PlanSweep, scale: &PlanScale, results: &[RunResult], dir: &
     if !missing.is_empty() {
         doc.push(Block::Paragraph(text(format!("Not complete: {}.", missing.join(", ")))));
     }
+    precondition_section(&mut doc, results);
     runs_section(&mut doc, &done);
     per_spp_section(&mut doc, &done);
 
@@ -103,6 +104,30 @@ pub fn write(sweep: &PlanSweep, scale: &PlanScale, results: &[RunResult], dir: &
     claims_section(&mut doc, &claims);
     write_document(&doc, dir)?;
     Ok(claims)
+}
+
+/// Whether each complete run beats the noisy input at every test spp, the precondition of the quality
+/// findings ([`super::claims`]).
+fn precondition_section(doc: &mut Document, results: &[RunResult]) {
+    let group = super::claims::Group(results);
+    let mut names: Vec<&str> = results.iter().filter(|r| r.done).map(|r| r.run.group.as_str()).collect();
+    names.sort_unstable();
+    names.dedup();
+    if names.is_empty() {
+        return;
+    }
+    let short: Vec<String> = names.iter().filter_map(|g| group.undertrained(g)).collect();
+    let line = if short.is_empty() {
+        format!("Precondition holds: every complete run ({}) beats the noisy input at every test spp.", names.len())
+    } else {
+        format!(
+            "Precondition fails for {} of {} run groups, whose quality findings are inconclusive (undertrained): {}.",
+            short.len(),
+            names.len(),
+            short.join("; ")
+        )
+    };
+    doc.push(Block::Paragraph(text(line)));
 }
 
 /// Per run: its flags, epochs, speed, losses and the test metrics of its model.
