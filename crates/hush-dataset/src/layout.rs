@@ -194,6 +194,18 @@ pub struct ViewImages {
 /// but the dataset predates them (saying how to add them), if a file is missing, if the sizes differ from each
 /// other or from the camera (naming the files and sizes), or if any image holds NaN/Inf.
 pub fn load_view(root: impl AsRef<Path>, view: &ViewRecord, spp: u32, aux: AuxSource) -> Result<ViewImages> {
+    load_view_with(root, view, spp, aux, false)
+}
+
+/// [`load_view`], also reading the noisy render's variance where `variance` is set and the dataset stores one
+/// (only a model that takes the variance needs it, so a lost or broken variance file stops no other).
+pub fn load_view_with(
+    root: impl AsRef<Path>,
+    view: &ViewRecord,
+    spp: u32,
+    aux: AuxSource,
+    variance: bool,
+) -> Result<ViewImages> {
     let layout = Layout::new(root.as_ref());
     let noisy = view.noisy_at(spp).ok_or_else(|| {
         Error::Dataset(format!(
@@ -220,7 +232,7 @@ pub fn load_view(root: impl AsRef<Path>, view: &ViewRecord, spp: u32, aux: AuxSo
         },
     };
     let files = [noisy.file.as_str(), features[0], features[1], features[2], features[3], view.reference.file.as_str()];
-    let files: Vec<&str> = files.into_iter().chain(noisy.variance.as_deref()).collect();
+    let files: Vec<&str> = files.into_iter().chain(noisy.variance.as_deref().filter(|_| variance)).collect();
     let mut images = Vec::with_capacity(files.len());
     for &file in &files {
         let path = layout.path(file);

@@ -6,9 +6,9 @@
 //! ([`Pretrained::adapt`]):
 //! * the color and every feature the source also had keep their weights (in every convolution that reads the
 //!   input: the first, and the last decoder level's, which the U-Net's skip feeds the input too);
-//! * `diffuse` takes the source's `albedo` weights when the source had albedo but no diffuse (on diffuse
-//!   surfaces the albedo *is* the diffuse reflectance, so OIDN's `alb,nrm` weights start a `diff,spec,nrm`
-//!   network close to where they were);
+//! * `diffuse` takes the source's `albedo` weights when the source had albedo but no diffuse and the new set
+//!   has no albedo (on diffuse surfaces the albedo *is* the diffuse reflectance, so OIDN's `alb,nrm` weights
+//!   start a `diff,spec,nrm` network close to where they were; beside the albedo itself it starts at zero);
 //! * every other new feature starts at zero, so it changes nothing until training gives it weight.
 //!
 //! With only same-name copies and zeros, the adapted network computes exactly what the source did. A feature
@@ -104,7 +104,8 @@ impl Pretrained {
         let slots: Vec<Option<usize>> = std::iter::once(Some(0))
             .chain(features.aux.iter().map(|&f| {
                 source_slot(f).or(match f {
-                    Feature::Diffuse => source_slot(Feature::Albedo),
+                    // Only where the albedo itself is no input: else its weights would count twice.
+                    Feature::Diffuse if !features.aux.contains(&Feature::Albedo) => source_slot(Feature::Albedo),
                     _ => None,
                 })
             }))
@@ -152,16 +153,19 @@ impl Pretrained {
         let NetConfig::UNet(unet) = &self.info.net else {
             bail!("the patch MLP predicts colors; it has no other head")
         };
+        let described = |h: Head| match h {
+            Head::Direct => "colors".to_string(),
+            Head::Kernel { size } => format!("{size}×{size} kernels"),
+        };
         let Head::Kernel { size } = head else {
             bail!(
-                "the weights predict {} kernels; they cannot start a network with the {} head (start from \
-                 weights that predict colors, e.g. `--init oidn`)",
-                from.name(),
-                head.name()
+                "the weights predict {}; they cannot start a network that predicts colors (start from weights that \
+                 predict colors, such as OIDN's)",
+                described(from)
             )
         };
         if from != Head::Direct {
-            bail!("the weights predict {} kernels, not {size}×{size}; start from them with their own head", from.name())
+            bail!("the weights predict {}, not {size}×{size} kernels; keep their head", described(from))
         }
         let target = unet.with_head(head);
         target.validate()?;
@@ -372,5 +376,11 @@ mod tests {
         assert_eq!(slice(&new, 8 + 3), slice(&old, 8 + 3), "diffuse from albedo in the skip");
         assert!(slice(&new, 8 + 6).iter().all(|v| *v == 0.0));
         assert_eq!(slice(&new, 8 + 9), slice(&old, 8 + 6), "normal in the skip");
+
+        // Beside the albedo itself, diffuse starts at zero: the albedo's weights must not count twice.
+        let both = pre.adapt(&InputFeatures::parse("alb,diff,nrm").unwrap()).unwrap();
+        let (old, new) = (w(&pre, "enc_conv0.weight"), w(&both, "enc_conv0.weight"));
+        assert_eq!(slice(&new, 3), slice(&old, 3), "albedo");
+        assert!(slice(&new, 6).iter().all(|v| *v == 0.0), "diffuse from zero beside the albedo");
     }
 }

@@ -226,8 +226,11 @@ pub(crate) fn gather(
         let (cw, ch) = (size - crop.shrink[0] as usize, size - crop.shrink[1] as usize);
         let transposed = crop.orientation & 4 != 0;
         let (tw, th) = if transposed { (ch, cw) } else { (cw, ch) };
-        // A zeroed sample keeps only its auxiliary features.
+        // A zeroed sample keeps only its auxiliary features, but not the color's variance: a black input
+        // with the noise of the rendered one would contradict itself.
         let first = if crop.zeroed { if target { channels } else { 3 } } else { 0 };
+        let zeroed_too =
+            |c: usize| crop.zeroed && !target && c >= 3 && features.aux.get((c - 3) / 3) == Some(&Feature::Variance);
         for oy in 0..th {
             for ox in 0..tw {
                 let (mut sx, mut sy) = if transposed { (oy, ox) } else { (ox, oy) };
@@ -239,7 +242,9 @@ pub(crate) fn gather(
                 }
                 let src = ((crop.y + sy) * im.width + crop.x + sx) * channels;
                 for (c, &from) in sources.iter().enumerate().skip(first) {
-                    item[c * plane + oy * size + ox] = im.data[src + from];
+                    if !zeroed_too(c) {
+                        item[c * plane + oy * size + ox] = im.data[src + from];
+                    }
                 }
             }
         }
@@ -352,5 +357,15 @@ mod tests {
         assert!(input[..3 * plane].iter().all(|&v| v == 0.0), "color zeroed");
         assert!(input[3 * plane..].iter().all(|&v| v != 0.0), "features kept");
         assert!(target.iter().all(|&v| v == 0.0), "target zeroed");
+
+        // The color's variance goes with the color: a black input has no noise.
+        let samples = vec![sample(32, 32, 12)];
+        let features = InputFeatures::parse("alb,var,nrm").unwrap();
+        let input = gather(&samples, &features, &[crop], false, 16);
+        let channel = |c: usize| &input[c * plane..(c + 1) * plane];
+        for c in 0..12 {
+            let zero = c < 3 || (6..9).contains(&c);
+            assert!(channel(c).iter().all(|&v| (v == 0.0) == zero), "channel {c}: zeroed {zero}");
+        }
     }
 }

@@ -1,7 +1,7 @@
 use hush_dataset::{
     AuxFiles, AuxKind, AuxRecord, AuxSource, CameraRecord, DatasetConfig, FireflyRecord, Layout, Manifest, PendingView,
     ReferenceRecord, RenderRecord, SceneEntry, Split, ViewGeneration, ViewRecord, check_dataset, link_or_copy,
-    load_view, temp_target, write_rgb,
+    load_view, load_view_with, temp_target, write_rgb,
 };
 
 use crate::{TempDir, ramp};
@@ -138,18 +138,22 @@ fn load_view_reads_all_images() {
     let err = load_view(dir.path(), &view, 32, AuxSource::Noisy).unwrap_err().to_string();
     assert!(err.contains("32 spp") && err.contains("[4, 16]"), "{err}");
 
-    // A render's variance is read where the manifest records one, with either auxiliary source.
+    // A render's variance is read where the manifest records one and it is asked for, with either auxiliary
+    // source; not asked for, a lost variance file stops nothing.
     assert_eq!(own.variance, None);
     let mut with_variance = view.clone();
     let name = Layout::noisy_variance_name("cbox", "v0", 16);
     write_rgb(dir.join(&name), &ramp(8, 8, 3, 21.0)).unwrap();
     with_variance.noisy[1].variance = Some(name.clone());
     for aux in [AuxSource::Noisy, AuxSource::Clean] {
-        assert_eq!(load_view(dir.path(), &with_variance, 16, aux).unwrap().variance, Some(ramp(8, 8, 3, 21.0)));
+        let images = load_view_with(dir.path(), &with_variance, 16, aux, true).unwrap();
+        assert_eq!(images.variance, Some(ramp(8, 8, 3, 21.0)));
+        assert_eq!(load_view(dir.path(), &with_variance, 16, aux).unwrap().variance, None);
     }
     std::fs::remove_file(dir.join(&name)).unwrap();
-    let err = load_view(dir.path(), &with_variance, 16, AuxSource::Noisy).unwrap_err().to_string();
+    let err = load_view_with(dir.path(), &with_variance, 16, AuxSource::Noisy, true).unwrap_err().to_string();
     assert!(err.contains(&name), "{err}");
+    assert!(load_view(dir.path(), &with_variance, 16, AuxSource::Noisy).is_ok());
 
     // A dataset from before the renders' own features were stored: clean ones only, and a clear error.
     let mut old = view.clone();

@@ -180,54 +180,25 @@ impl<'a> Group<'a> {
     }
 
     /// Where a run of `group` does not beat the noisy input (the module's precondition): the first
-    /// such run and spp, as `` `n` (seed 0) at 64 spp: 28.41 dB against the noisy 32.60 ``; `None` when every
-    /// run beats it at every spp of its evaluation.
+    /// such run and spp (see [`run_undertrained`]); `None` when every run beats it at every spp.
     pub(super) fn undertrained(&self, group: &str) -> Option<String> {
-        for r in self.runs(group) {
-            let noisy = r.noisy_rows();
-            let mut spps: Vec<u64> = r.model_rows().iter().map(|m| m.spp).collect();
-            spps.sort_unstable();
-            spps.dedup();
-            for spp in spps {
-                let pairs: Vec<(f64, f64)> = r
-                    .model_rows()
-                    .into_iter()
-                    .filter(|m| m.spp == spp)
-                    .filter_map(|m| {
-                        let n = noisy.iter().find(|n| n.view == m.view && n.spp == spp)?;
-                        Some((m.psnr?, n.psnr?))
-                    })
-                    .collect();
-                let (model, input) = (mean(pairs.iter().map(|p| p.0)), mean(pairs.iter().map(|p| p.1)));
-                if let (Some(model), Some(input)) = (model, input)
-                    && model <= input
-                {
-                    return Some(format!(
-                        "`{group}` (seed {}) at {spp} spp: {model:.2} dB against the noisy {input:.2}",
-                        r.run.seed
-                    ));
-                }
-            }
-        }
-        None
+        self.runs(group).into_iter().find_map(run_undertrained)
     }
 
     /// `claim` under the precondition: inconclusive (undertrained) when a run of `groups` does not beat
     /// the noisy input at every spp, saying which.
-    pub(super) fn gated(&self, mut claim: Claim, groups: &[&str]) -> Claim {
-        if matches!(claim.verdict, Verdict::NotMeasured) {
-            return claim;
-        }
+    pub(super) fn gated(&self, claim: Claim, groups: &[&str]) -> Claim {
         let short: Vec<String> = groups.iter().filter_map(|g| self.undertrained(g)).collect();
-        if !short.is_empty() {
-            claim.measured = format!("{}. Below the noisy input: {}", claim.measured, short.join("; "));
-            claim.verdict = Verdict::Undertrained;
-        }
-        claim
+        undertrained_if(claim, short)
     }
 
     /// "`a` beats `b` on `metric`" as a claim, under the precondition.
     pub(super) fn better(&self, sweep: &str, thesis: &str, a: &str, b: &str, metric: Metric) -> Claim {
+        self.gated(self.better_ungated(sweep, thesis, a, b, metric), &[a, b])
+    }
+
+    /// [`Self::better`] without the precondition.
+    fn better_ungated(&self, sweep: &str, thesis: &str, a: &str, b: &str, metric: Metric) -> Claim {
         let (measured, verdict) = match self.diffs(a, b, metric, None) {
             None => (format!("needs runs `{a}` and `{b}`"), Verdict::NotMeasured),
             Some(d) => {
@@ -239,7 +210,7 @@ impl<'a> Group<'a> {
                 (format!("{means}{a} better by {p}"), p.direction())
             }
         };
-        self.gated(Claim { sweep: sweep.into(), thesis: thesis.into(), measured, verdict }, &[a, b])
+        Claim { sweep: sweep.into(), thesis: thesis.into(), measured, verdict }
     }
 
     /// Two comparisons that must both hold.
@@ -250,10 +221,50 @@ impl<'a> Group<'a> {
         x: (&str, &str, Metric),
         y: (&str, &str, Metric),
     ) -> Claim {
-        let a = self.better(sweep, thesis, x.0, x.1, x.2);
-        let b = self.better(sweep, thesis, y.0, y.1, y.2);
-        Claim { measured: format!("{}; {}", a.measured, b.measured), verdict: both(a.verdict, b.verdict), ..a }
+        let a = self.better_ungated(sweep, thesis, x.0, x.1, x.2);
+        let b = self.better_ungated(sweep, thesis, y.0, y.1, y.2);
+        let joined =
+            Claim { measured: format!("{}; {}", a.measured, b.measured), verdict: both(a.verdict, b.verdict), ..a };
+        let mut groups = vec![x.0, x.1, y.0, y.1];
+        groups.sort_unstable();
+        groups.dedup();
+        self.gated(joined, &groups)
     }
+}
+
+/// Where one run does not beat the noisy input: the first spp (ascending) at which its model's mean PSNR over
+/// the test views is not above the noisy input's on the same views, as `` `n` (seed 0) at 64 spp: 28.41 dB
+/// against the noisy 32.60 ``.
+pub(super) fn run_undertrained(r: &RunResult) -> Option<String> {
+    let noisy = r.noisy_rows();
+    let mut spps: Vec<u64> = r.model_rows().iter().map(|m| m.spp).collect();
+    spps.sort_unstable();
+    spps.dedup();
+    spps.into_iter().find_map(|spp| {
+        let pairs: Vec<(f64, f64)> = r
+            .model_rows()
+            .into_iter()
+            .filter(|m| m.spp == spp)
+            .filter_map(|m| {
+                let n = noisy.iter().find(|n| n.view == m.view && n.spp == spp)?;
+                Some((m.psnr?, n.psnr?))
+            })
+            .collect();
+        let (model, input) = (mean(pairs.iter().map(|p| p.0))?, mean(pairs.iter().map(|p| p.1))?);
+        (model <= input).then(|| {
+            format!("`{}` (seed {}) at {spp} spp: {model:.2} dB against the noisy {input:.2}", r.run.group, r.run.seed)
+        })
+    })
+}
+
+/// `claim` made inconclusive (undertrained) when `short` names runs below the noisy input; a claim not
+/// measured stays so.
+pub(super) fn undertrained_if(mut claim: Claim, short: Vec<String>) -> Claim {
+    if !short.is_empty() && claim.verdict != Verdict::NotMeasured {
+        claim.measured = format!("{}. Below the noisy input: {}", claim.measured, short.join("; "));
+        claim.verdict = Verdict::Undertrained;
+    }
+    claim
 }
 
 pub(super) fn both(a: Verdict, b: Verdict) -> Verdict {

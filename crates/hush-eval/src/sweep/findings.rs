@@ -1,6 +1,8 @@
 //! Which thesis findings each sweep answers, and how (see [`super::claims`] for the rule).
 
-use super::claims::{Claim, Group, Metric, PSNR_MARGIN_DB, Paired, TIME_MARGIN, Verdict, both};
+use super::claims::{
+    Claim, Group, Metric, PSNR_MARGIN_DB, Paired, TIME_MARGIN, Verdict, both, run_undertrained, undertrained_if,
+};
 use super::results::{RunResult, mean};
 
 /// Every claim the sweep `sweep` (by name) can answer from its runs.
@@ -44,8 +46,7 @@ pub fn claims(sweep: &str, results: &[RunResult]) -> Vec<Claim> {
                 } else {
                     Verdict::Inconclusive
                 };
-                let gate = r.run.group.clone();
-                out.push(g.gated(claim(
+                out.push(undertrained_if(claim(
                     thesis,
                     format!(
                         "{}: best test loss {best:.4} at epoch {best_epoch} of {last_epoch}; final {last:.4} (rise {rise:+.4}, \
@@ -57,7 +58,7 @@ pub fn claims(sweep: &str, results: &[RunResult]) -> Vec<Claim> {
                         2.0 * jitter
                     ),
                     verdict,
-                ), &[&gate]));
+                ), run_undertrained(r).into_iter().collect()));
             }
             out
         }

@@ -118,7 +118,10 @@ fn precondition_section(doc: &mut Document, results: &[RunResult]) {
     }
     let short: Vec<String> = names.iter().filter_map(|g| group.undertrained(g)).collect();
     let line = if short.is_empty() {
-        format!("Precondition holds: every complete run ({}) beats the noisy input at every test spp.", names.len())
+        format!(
+            "Precondition holds: every complete run ({} run groups) beats the noisy input at every test spp.",
+            names.len()
+        )
     } else {
         format!(
             "Precondition fails for {} of {} run groups, whose quality findings are inconclusive (undertrained): {}.",

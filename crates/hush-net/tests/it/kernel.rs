@@ -153,7 +153,7 @@ fn a_direct_network_starts_a_kernel_predicting_one() -> Result<()> {
     let err = kpn.with_head(Head::Direct).unwrap_err().to_string();
     assert!(err.contains("cannot start"), "{err}");
     let err = kpn.with_head(Head::Kernel { size: 7 }).unwrap_err().to_string();
-    assert!(err.contains("not 7×7"), "{err}");
+    assert!(err.contains("5×5 kernels, not 7×7"), "{err}");
     Ok(())
 }
 

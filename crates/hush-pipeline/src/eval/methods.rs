@@ -17,6 +17,10 @@ pub trait Method {
     /// The test image for `images.color`, and the median seconds of `timing_runs` warm denoising runs
     /// (`None` when nothing is denoised); or why the method cannot run here.
     fn run(&self, images: &ViewImages, timing_runs: usize) -> Result<Run>;
+    /// Whether it reads the noisy render's variance ([`ViewImages::variance`]).
+    fn needs_variance(&self) -> bool {
+        false
+    }
 }
 
 /// What a [`Method`] made of one view.
@@ -110,6 +114,10 @@ pub struct Model {
 impl Method for Model {
     fn name(&self) -> &str {
         &self.name
+    }
+
+    fn needs_variance(&self) -> bool {
+        self.denoiser.features().contains(&hush_net::Feature::Variance)
     }
 
     fn run(&self, images: &ViewImages, timing_runs: usize) -> Result<Run> {

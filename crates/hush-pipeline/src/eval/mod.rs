@@ -11,7 +11,7 @@ mod pictures;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use hush_dataset::{AuxSource, Image, Manifest, Split, load_view, write_png_preview};
+use hush_dataset::{AuxSource, Image, Manifest, Split, load_view_with, write_png_preview};
 use hush_eval::viewer::file_safe;
 use hush_eval::{REFERENCE, Report, Row, Viewer, compare, exposure_of};
 
@@ -171,6 +171,7 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
     ));
     report.notes.push("PNG previews of every image are in previews/ beside report.md.".into());
 
+    let variance = methods.iter().any(|m| m.needs_variance());
     for view in &views {
         let name = format!("{}_{}", view.scene, view.view);
         let spps: Vec<u32> =
@@ -180,7 +181,7 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
         };
         let mut reference_row = true;
         for spp in spps {
-            let images = load_view(&plan.dataset, view, spp, plan.aux)?;
+            let images = load_view_with(&plan.dataset, view, spp, plan.aux, variance)?;
             let exposure = exposure_of(&images.reference)?;
             let preview = |method: &str, image: &Image| -> Result<String> {
                 let file = format!("{name}_{spp:06}_{}.png", file_safe(method));

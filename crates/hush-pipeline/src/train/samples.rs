@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use anyhow::{Context, Result, bail};
-use hush_dataset::{Image, ViewRecord, load_view};
+use hush_dataset::{Image, ViewRecord, load_view_with};
 use hush_hash::fnv1a;
 use hush_net::transfer::Transfer;
 use hush_train::{PREPARATION_VERSION, TrainSample, decode_samples, round_trip};
@@ -56,7 +56,8 @@ pub(crate) fn load_split(
     let samples = cached_samples(&path, &key, observer, || {
         let mut samples = Vec::new();
         for &(view, spp) in &records {
-            let images = load_view(&cfg.dataset, view, spp, cfg.aux)?;
+            let variance = features.aux.contains(&hush_net::Feature::Variance);
+            let images = load_view_with(&cfg.dataset, view, spp, cfg.aux, variance)?;
             let aux = features
                 .aux
                 .iter()
