@@ -24,25 +24,23 @@ fn the_decision_rule() {
     assert_eq!(Paired::of(&[0.5, 0.3, 0.5, 0.3]).within(0.5), Verdict::Inconclusive);
 }
 
-fn result(group: &str, psnr: &[(u64, f64)], epochs: &[(usize, f64, f64)]) -> RunResult {
-    let run = crate::sweep::run("s", group, Path::new("s"));
-    let eval = psnr
-        .iter()
+/// Evaluation rows of `method`: PSNR per (spp, value), two rows per view.
+fn rows(method: &str, psnr: &[(u64, f64)]) -> Vec<EvalRow> {
+    psnr.iter()
         .enumerate()
         .map(|(i, &(spp, p))| EvalRow {
             view: format!("v{}", i / 2),
-            method: "train/model".into(),
+            method: method.into(),
             spp,
             psnr: Some(p),
-            ssim: None,
-            mae: None,
-            rel_mse: None,
-            render_seconds: None,
-            denoise_seconds: None,
-            preview: None,
-            seconds: None,
+            ..Default::default()
         })
-        .collect();
+        .collect()
+}
+
+fn result(group: &str, psnr: &[(u64, f64)], epochs: &[(usize, f64, f64)]) -> RunResult {
+    let run = crate::sweep::run("s", group, Path::new("s"));
+    let eval = rows("train/model", psnr);
     let epochs = epochs.iter().map(|&(e, tr, te)| epoch(e, tr, Some(te), e as f64)).collect();
     RunResult { run, done: true, epochs, eval, pictures: vec![] }
 }
@@ -109,18 +107,7 @@ fn overfitting_is_read_from_the_test_loss_curve() {
 #[test]
 fn claims_between_models_below_the_noisy_input_are_undertrained() {
     let with_noisy = |mut r: RunResult, noisy: &[(u64, f64)]| {
-        let rows: Vec<EvalRow> = noisy
-            .iter()
-            .enumerate()
-            .map(|(i, &(spp, p))| EvalRow {
-                view: format!("v{}", i / 2),
-                method: "noisy".into(),
-                spp,
-                psnr: Some(p),
-                ..Default::default()
-            })
-            .collect();
-        r.eval.extend(rows);
+        r.eval.extend(rows("noisy", noisy));
         r
     };
     // Two logged epochs, one second each: what the timing claim reads.
