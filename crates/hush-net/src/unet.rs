@@ -619,14 +619,6 @@ pub fn apply_kernels(logits: &Tensor, color: &Tensor, size: usize) -> Result<Ten
     let weights = shifted.broadcast_div(&shifted.sum_keepdim(1)?)?;
     let r = size / 2;
     let padded = color.pad_with_same(2, r, r)?.pad_with_same(3, r, r)?;
-    let mut out: Option<Tensor> = None;
-    let mut add = |term: Tensor| -> Result<()> {
-        out = Some(match out.take() {
-            Some(acc) => (acc + term)?,
-            None => term,
-        });
-        Ok(())
-    };
     if weights.track_op() {
         // Training: per color channel, its `size²` shifted copies side by side (`N × size² × H × W`,
         // contiguous) times the weights, summed over the taps. The weights are never sliced, so their
@@ -643,13 +635,14 @@ pub fn apply_kernels(logits: &Tensor, color: &Tensor, size: usize) -> Result<Ten
         return Tensor::cat(&channels, 1);
     }
     // Inference: tap by tap, in the memory of a few images.
+    let mut out = color.zeros_like()?;
     for dy in 0..size {
         let rows = padded.narrow(2, dy, h)?;
         for dx in 0..size {
-            add(rows.narrow(3, dx, w)?.broadcast_mul(&weights.narrow(1, dy * size + dx, 1)?)?)?;
+            out = (out + rows.narrow(3, dx, w)?.broadcast_mul(&weights.narrow(1, dy * size + dx, 1)?)?)?;
         }
     }
-    Ok(out.expect("a kernel has at least one tap"))
+    Ok(out)
 }
 
 /// Pads an NCHW tensor with zeros at the bottom and right so that H and W are multiples of `multiple`.
