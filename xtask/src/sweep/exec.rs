@@ -138,8 +138,14 @@ fn exec(hush: &Path, args: &[String], log: &Path, threads: usize) -> Result<(i32
 /// then writes `done.json`.
 /// A run that another process (a second sweep, a Slurm task) holds the lock of is left to it.
 pub fn run_one(hush: &Path, run: &Run, scale: &Scale, dataset: &Path, dir: &Path, threads: usize) -> Outcome {
+    if let Err(e) = restore(run, scale, dir) {
+        return Outcome::Failed(e);
+    }
     if is_done(run, dir) {
-        return Outcome::Skipped;
+        return match record(run, scale, dir) {
+            Ok(()) => Outcome::Skipped,
+            Err(e) => Outcome::Failed(e),
+        };
     }
     let lock = match lock(dir) {
         Ok(Some(lock)) => lock,
@@ -150,10 +156,11 @@ pub fn run_one(hush: &Path, run: &Run, scale: &Scale, dataset: &Path, dir: &Path
     if is_done(run, dir) {
         return Outcome::Skipped;
     }
-    let outcome = match run_inner(hush, run, scale, dataset, dir, threads) {
-        Ok(s) => Outcome::Done(s),
-        Err(e) => Outcome::Failed(e),
-    };
+    let outcome =
+        match run_inner(hush, run, scale, dataset, dir, threads).and_then(|s| Ok((record(run, scale, dir)?, s))) {
+            Ok(((), s)) => Outcome::Done(s),
+            Err(e) => Outcome::Failed(e),
+        };
     drop(lock);
     outcome
 }
@@ -216,6 +223,91 @@ fn run_inner(hush: &Path, run: &Run, scale: &Scale, dataset: &Path, dir: &Path, 
     });
     write_json(&dir.join("done.json"), &done)?;
     Ok(start.elapsed().as_secs_f64())
+}
+
+/// The files of a finished run that its record keeps: what `hush sweep-report` reads (`done.json` last).
+const RECORDED: [&str; 4] = ["train/metrics.csv", "train/summary.json", "eval/summary.json", "done.json"];
+
+/// What the scale's dataset is, as a record names it: its scenes as the scales file gives them (relative to the
+/// repository) and its flags. A record is only used for a run of the same dataset.
+fn dataset_identity(scale: &Scale) -> Value {
+    json!({"scenes": scale.scenes, "flags": flags(&scale.dataset)})
+}
+
+/// Copies a finished run's results ([`RECORDED`]) into the scale's record folder ([`Scale::record_of`]),
+/// unless they are there already: small files, meant to be committed, so that a fresh clone (or a machine
+/// that lost `target/`) skips the run ([`restore`]). Paths in `done.json` are written relative to the
+/// repository, or with the sweeps' folder as `<sweeps>`; the record is written into a temporary folder and
+/// renamed into place, so a killed process leaves no half record.
+pub fn record(run: &Run, scale: &Scale, dir: &Path) -> Result<()> {
+    let Some(to) = scale.record_of(run) else { return Ok(()) };
+    if to.join("done.json").is_file() {
+        return Ok(());
+    }
+    let tmp = to.with_file_name(format!(".{}.tmp-{}", run.name, std::process::id()));
+    let _ = std::fs::remove_dir_all(&tmp);
+    for file in RECORDED {
+        let from = dir.join(file);
+        let dest = tmp.join(file);
+        if let Some(parent) = dest.parent() {
+            std::fs::create_dir_all(parent).map_err(|e| format!("{}: {e}", parent.display()))?;
+        }
+        if file == "done.json" {
+            let mut done = read_json(&from)?;
+            done["dataset"] = dataset_identity(scale);
+            let text = serde_json::to_string_pretty(&done).map_err(|e| format!("{}: {e}", from.display()))?;
+            let root = format!("{}/", project_root().display());
+            let sweeps = dir.ancestors().nth(3).map(|p| p.display().to_string()).unwrap_or_default();
+            let text = text.replace(&root, "");
+            let text = if sweeps.is_empty() { text } else { text.replace(&sweeps, "<sweeps>") };
+            std::fs::write(&dest, text + "\n").map_err(|e| format!("{}: {e}", dest.display()))?;
+        } else if from.is_file() {
+            std::fs::copy(&from, &dest).map_err(|e| format!("copying {}: {e}", from.display()))?;
+        }
+    }
+    if let Some(parent) = to.parent() {
+        std::fs::create_dir_all(parent).map_err(|e| format!("{}: {e}", parent.display()))?;
+    }
+    let _ = std::fs::remove_dir_all(&to);
+    std::fs::rename(&tmp, &to).map_err(|e| format!("recording {} in {}: {e}", run.name, to.display()))
+}
+
+/// Where a run has no finished folder but the scale's record has it, with the same `hush train` flags, seed
+/// and dataset, copies the record back into the folder, so that the run counts as complete and the report
+/// reads it; a record of other settings is left alone with a warning (the run is redone, and its new
+/// results are not recorded over the old: delete the record to replace it).
+pub fn restore(run: &Run, scale: &Scale, dir: &Path) -> Result<()> {
+    let Some(from) = scale.record_of(run) else { return Ok(()) };
+    if dir.join("done.json").is_file() || !from.join("done.json").is_file() {
+        return Ok(());
+    }
+    let done = read_json(&from.join("done.json"))?;
+    if done["train_flags"] != Value::Object(run.train.clone())
+        || done["seed"] != json!(run.seed)
+        || done["dataset"] != dataset_identity(scale)
+    {
+        eprintln!(
+            "sweep: warning: the record {} has other settings than the sweep now gives; {}/{} is run again",
+            from.display(),
+            run.sweep,
+            run.name
+        );
+        return Ok(());
+    }
+    // done.json last: until it is there the folder is an unfinished run.
+    for file in RECORDED {
+        let (src, dest) = (from.join(file), dir.join(file));
+        if !src.is_file() {
+            continue;
+        }
+        if let Some(parent) = dest.parent() {
+            std::fs::create_dir_all(parent).map_err(|e| format!("{}: {e}", parent.display()))?;
+        }
+        crate::util::write_atomic_with(&dest, |tmp| std::fs::copy(&src, tmp).map(drop))
+            .map_err(|e| format!("restoring {}: {e}", dest.display()))?;
+    }
+    eprintln!("sweep: {}/{} restored from its record {}", run.sweep, run.name, from.display());
+    Ok(())
 }
 
 /// `to` relative to the folder `from` (both absolute, or both relative to the same folder).
@@ -357,6 +449,7 @@ mod tests {
         let script = format!(
             "#!/bin/sh\n[ \"$1\" = probe ] && exit 0\necho \"$1\" >> {calls}\n\
              if [ \"$1\" = train ]; then mkdir -p \"$5\" && touch \"$5/summary.json\" \"$5/model.safetensors\"; fi\nif [ \"$1\" = eval ] && [ -e {fail} ]; then echo boom >&2; exit 3; fi\n\
+             if [ \"$1\" = eval ]; then mkdir -p \"$7\" && echo '{{\"rows\": []}}' > \"$7/summary.json\"; fi\n\
              exit 0\n",
             calls = dir.join("calls").display(),
             fail = dir.join("fail").display()
@@ -390,6 +483,44 @@ mod tests {
         assert!(e.contains("another process is running it"), "{e}");
         drop(held);
         assert!(lock(&run_dir).unwrap().is_some());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A scale that records its runs keeps each finished run's results in its record folder, with no path of
+    /// the machine in them; with the sweeps' folder gone (a fresh clone), the runs are restored from the record
+    /// instead of being trained again, and a record of other settings is not used.
+    #[cfg(unix)]
+    #[test]
+    fn recorded_runs_are_restored_instead_of_rerun() {
+        let dir = scratch("record");
+        let hush = fake_hush(&dir);
+        let (mut scale, runs) = fixture();
+        scale.record = Some(dir.join("record"));
+        let layout = Layout { root: dir.join("sweeps") };
+        let jobs: Vec<_> =
+            runs.iter().map(|r| (r.clone(), &scale, dir.join("data"), layout.run(r, &scale.name))).collect();
+        let calls = || std::fs::read_to_string(dir.join("calls")).unwrap_or_default();
+        assert!(run_all(&hush, &jobs, &[], 2, 1).iter().all(|o| matches!(o, Outcome::Done(_))));
+        let rec = dir.join("record/t/b");
+        let done = std::fs::read_to_string(rec.join("done.json")).unwrap();
+        assert!(rec.join("eval/summary.json").is_file() && rec.join("train/summary.json").is_file());
+        assert!(!done.contains(&dir.join("sweeps").display().to_string()) && done.contains("<sweeps>/"), "{done}");
+        assert!(!rec.join("train/model.safetensors").exists(), "weights are not recorded");
+
+        // A fresh clone: no sweeps folder, the record committed. Nothing is trained or evaluated.
+        std::fs::remove_dir_all(dir.join("sweeps")).unwrap();
+        std::fs::write(dir.join("calls"), "").unwrap();
+        assert_eq!(run_all(&hush, &jobs, &[], 2, 1), [Outcome::Skipped, Outcome::Skipped]);
+        assert_eq!(calls(), "");
+        assert!(jobs[1].3.join("done.json").is_file() && jobs[1].3.join("eval/summary.json").is_file());
+
+        // A record of other settings (here another dataset) is not used: the run is done again.
+        std::fs::remove_dir_all(dir.join("sweeps")).unwrap();
+        scale.dataset.insert("size".into(), json!(48));
+        let jobs: Vec<_> =
+            runs.iter().map(|r| (r.clone(), &scale, dir.join("data"), layout.run(r, &scale.name))).collect();
+        assert!(run_all(&hush, &jobs, &[], 1, 1).iter().all(|o| matches!(o, Outcome::Done(_))));
+        assert_eq!(calls(), "train\neval\ntrain\neval\n");
         let _ = std::fs::remove_dir_all(&dir);
     }
 

@@ -50,6 +50,18 @@ pub struct Scale {
     pub eval: Map<String, Value>,
     /// Every run is trained once per seed.
     pub seeds: Vec<u64>,
+    /// Where each finished run's results are recorded (relative to the repository root unless absolute), so
+    /// that a fresh clone skips them (`exec::record`); none for scales whose runs are cheap to redo.
+    pub record: Option<PathBuf>,
+}
+
+impl Scale {
+    /// The folder a run's results are recorded in, if the scale records them.
+    pub fn record_of(&self, run: &Run) -> Option<PathBuf> {
+        let root = self.record.as_ref()?;
+        let root = if root.is_absolute() { root.clone() } else { crate::util::project_root().join(root) };
+        Some(root.join(&run.sweep).join(&run.name))
+    }
 }
 
 /// One sweep file.
@@ -184,7 +196,17 @@ pub fn parse_scales(text: &str, file: &Path) -> Result<Vec<Scale>> {
             ));
         };
         let s = table(v, name, file)?;
-        check_keys(&s, &["description", "scenes", "dataset", "train", "eval", "seeds"], &format!("[{name}]"), file)?;
+        check_keys(
+            &s,
+            &["description", "scenes", "dataset", "train", "eval", "seeds", "record"],
+            &format!("[{name}]"),
+            file,
+        )?;
+        let record = match s.get("record") {
+            None => None,
+            Some(Value::String(r)) if !r.is_empty() => Some(PathBuf::from(r)),
+            Some(_) => return Err(format!("{}: [{name}] record must be a folder path", file.display())),
+        };
         let scenes = match s.get("scenes") {
             Some(Value::Array(a)) if !a.is_empty() => a
                 .iter()
@@ -213,7 +235,7 @@ pub fn parse_scales(text: &str, file: &Path) -> Result<Vec<Scale>> {
                 .ok_or_else(|| format!("{}: [{name}] seeds must be non-negative integers", file.display()))?,
             Some(_) => return Err(format!("{}: [{name}] seeds must be a non-empty list of integers", file.display())),
         };
-        scales.push(Scale { name: name.into(), scenes, dataset, train, eval, seeds });
+        scales.push(Scale { name: name.into(), scenes, dataset, train, eval, seeds, record });
     }
     Ok(scales)
 }
@@ -403,6 +425,7 @@ eval = { timing-runs = 1 }
 seeds = [0, 1]
 [small]
 scenes = ["a"]
+record = "docs/results/sweeps-small/runs"
 [thesis]
 scenes = ["b"]
 train = { steps = 100 }
@@ -458,6 +481,14 @@ variants = [{ name = "const", schedule = "constant" }, { name = "cosine", schedu
         assert_eq!(s[1].seeds, vec![0]);
         assert_eq!(flags(&s[0].dataset), ["--size", "32", "--spp", "4,16"]);
         assert_eq!(flags(&s[0].eval), ["--timing-runs", "1"]);
+        let run = parse_sweep("loss", "[base]\nloss = \"l1\"", Path::new("loss.toml")).unwrap().runs(&s[1]).remove(0);
+        assert_eq!(
+            (s[0].record_of(&run), s[1].record.as_deref()),
+            (None, Some(Path::new("docs/results/sweeps-small/runs")))
+        );
+        assert!(s[1].record_of(&run).unwrap().ends_with("docs/results/sweeps-small/runs/loss/base"));
+        let bad = SCALES_TOML.replace("record = \"docs/results/sweeps-small/runs\"", "record = 3");
+        assert!(parse_scales(&bad, Path::new("scales.toml")).unwrap_err().contains("record must be a folder path"));
     }
 
     #[test]
