@@ -190,49 +190,54 @@ fn oidn_native_reproduces_the_shared_outputs() {
     }
 }
 
-/// OIDN's own runtime runs weights that are not its own as hush does: OIDN's `rt_hdr_alb_nrm` with every
-/// weight changed by up to ±3 % (deterministically), written as TZA the way `hush export` writes a hush
-/// model, denoises a 64² Cornell box crop within 45 dB of hush's output for the same file, and visibly
-/// unlike OIDN's built-in weights (so the file was used). Skipped without the venv, like the test above.
+/// OIDN's own runtime runs weights that are not its own as hush does: OIDN's `rt_hdr_alb_nrm` (`unet`) and
+/// `rt_hdr_calb_cnrm_large` (`unet_large`, which OIDN's runtime recognizes by its tensors), with every weight
+/// changed by up to ±3 % (deterministically), written as TZA the way `hush export` writes a hush model,
+/// denoise a 64² Cornell box crop within 45 dB of hush's output for the same file, and visibly unlike OIDN's
+/// built-in weights (so the file was used). Skipped without the venv, like the test above.
 #[test]
 fn oidn_runtime_runs_other_weights_as_hush_does() {
     use hush_net::{Net, load_tza, parse_tza, write_tza};
 
     let require = std::env::var_os("HUSH_REQUIRE_BASELINES").is_some_and(|v| v == "1");
     let python = venv_python();
-    let official =
-        std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/weights/oidn-2.5.1/rt_hdr_alb_nrm.tza"))
-            .unwrap();
-    let mut tensors = parse_tza(&official).unwrap();
-    for (t, tensor) in tensors.iter_mut().enumerate() {
-        for (i, v) in tensor.values.iter_mut().enumerate() {
-            let wobble = (((i * 7919 + t * 104_729) % 601) as f32 / 300.0 - 1.0) * 0.03;
-            *v *= 1.0 + wobble;
-        }
-    }
-    let weights = write_tza(&tensors).unwrap();
     let (color, albedo, normal, _) = cbox_crop(200, 300, 64);
     let inputs = [Input { color: &color, albedo: Some(&albedo), normal: Some(&normal) }];
-    let theirs = match hush_eval::external::run_oidn_with_weights(&inputs, &weights, &python, 1).unwrap() {
-        Outcome::Skipped { reason, install } => {
-            assert!(!require, "{reason} (install: {install})");
-            eprintln!("skipped: {reason}; install: {install}");
-            return;
+    for name in ["rt_hdr_alb_nrm", "rt_hdr_calb_cnrm_large"] {
+        let official = std::fs::read(
+            Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../data/weights/oidn-2.5.1/{name}.tza")),
+        )
+        .unwrap();
+        let mut tensors = parse_tza(&official).unwrap();
+        for (t, tensor) in tensors.iter_mut().enumerate() {
+            for (i, v) in tensor.values.iter_mut().enumerate() {
+                let wobble = (((i * 7919 + t * 104_729) % 601) as f32 / 300.0 - 1.0) * 0.03;
+                *v *= 1.0 + wobble;
+            }
         }
-        Outcome::Done { images, .. } => images.into_iter().next().unwrap(),
-    };
-    let (net, info) = load_tza(&weights, None, &candle_core::Device::Cpu).unwrap();
-    let aux = [albedo.data.as_slice(), normal.data.as_slice()];
-    let ours = hush_net::denoise(&Net::from(net), &info, color.width, color.height, &color.data, &aux).unwrap();
-    let ours = Image::new(color.width, color.height, 3, ours).unwrap();
-    let agreement = hush_eval::psnr(&theirs, &ours).unwrap();
-    let Outcome::Done { images, .. } = run_baseline(Baseline::Oidn, &inputs, &python, 1).unwrap() else {
-        panic!("OIDN ran with weights but not without")
-    };
-    let from_built_in = hush_eval::psnr(&theirs, &images[0]).unwrap();
-    eprintln!(
-        "OIDN's runtime with the file vs hush: {agreement:.1} dB; vs OIDN's built-in weights: {from_built_in:.1} dB"
-    );
-    assert!(agreement >= 45.0, "{agreement:.1} dB");
-    assert!(from_built_in < agreement - 5.0, "the weights file made no difference: {from_built_in:.1} dB");
+        let weights = write_tza(&tensors).unwrap();
+        let theirs = match hush_eval::external::run_oidn_with_weights(&inputs, &weights, &python, 1).unwrap() {
+            Outcome::Skipped { reason, install } => {
+                assert!(!require, "{reason} (install: {install})");
+                eprintln!("skipped: {reason}; install: {install}");
+                return;
+            }
+            Outcome::Done { images, .. } => images.into_iter().next().unwrap(),
+        };
+        let (net, info) = load_tza(&weights, None, &candle_core::Device::Cpu).unwrap();
+        let aux = [albedo.data.as_slice(), normal.data.as_slice()];
+        let ours = hush_net::denoise(&Net::from(net), &info, color.width, color.height, &color.data, &aux).unwrap();
+        let ours = Image::new(color.width, color.height, 3, ours).unwrap();
+        let agreement = hush_eval::psnr(&theirs, &ours).unwrap();
+        let Outcome::Done { images, .. } = run_baseline(Baseline::Oidn, &inputs, &python, 1).unwrap() else {
+            panic!("OIDN ran with weights but not without")
+        };
+        let from_built_in = hush_eval::psnr(&theirs, &images[0]).unwrap();
+        eprintln!(
+            "{name}: OIDN's runtime with the file vs hush: {agreement:.1} dB; vs OIDN's built-in weights: \
+             {from_built_in:.1} dB"
+        );
+        assert!(agreement >= 45.0, "{name}: {agreement:.1} dB");
+        assert!(from_built_in < agreement - 5.0, "{name}: the weights file made no difference: {from_built_in:.1} dB");
+    }
 }

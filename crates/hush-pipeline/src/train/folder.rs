@@ -124,6 +124,13 @@ pub fn incompatibilities(stored: &RunConfig, now: &RunConfig) -> Vec<String> {
         .differences(&now.train)
         .into_iter()
         .filter(|(k, _, _)| !matches!(k.as_str(), "steps" | "eval_every"))
+        // The starting weights are the same when their bytes and features are, wherever the file now lies (a
+        // clone at another path, a relative path given from another folder).
+        .filter(|(k, _, _)| {
+            k != "init"
+                || !matches!((&stored.train.init, &now.train.init),
+                    (Some(a), Some(b)) if a.fnv1a == b.fnv1a && a.features == b.features)
+        })
         .map(|(k, a, b)| match k.as_str() {
             "features" => format!("features: {} in the run, {} now", stored.train.features, now.train.features),
             "init" => {
@@ -186,4 +193,40 @@ pub(crate) fn name_batch(batch: &str, names: &[String]) -> String {
         })
         .collect::<Vec<_>>()
         .join(", ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hush_net::{Feature, InputFeatures};
+    use hush_train::{InitRecord, TrainConfig};
+
+    fn config(init: Option<InitRecord>) -> RunConfig {
+        let features = InputFeatures { aux: vec![Feature::Albedo, Feature::Normal] };
+        let mut train = TrainConfig::thesis(features);
+        train.init = init;
+        RunConfig {
+            dataset: "d".into(),
+            spp: vec![],
+            device: "cpu".into(),
+            aux: hush_dataset::AuxSource::Noisy,
+            validation: vec![],
+            train,
+        }
+    }
+
+    /// The starting weights are named by their bytes: the same file at another path continues the run, other
+    /// bytes (or none) do not.
+    #[test]
+    fn init_weights_are_compared_by_their_bytes() {
+        let features = InputFeatures { aux: vec![Feature::Albedo, Feature::Normal] };
+        let at = |path: &str, bytes: &[u8]| Some(InitRecord::of(path, bytes, features.clone()));
+        let stored = config(at("data/weights/w.tza", b"abc"));
+        assert!(incompatibilities(&stored, &config(at("/elsewhere/data/weights/w.tza", b"abc"))).is_empty());
+        let other = incompatibilities(&stored, &config(at("data/weights/w.tza", b"abd")));
+        assert_eq!(other.len(), 1, "{other:?}");
+        assert!(other[0].starts_with("init: data/weights/w.tza (FNV-1a"), "{other:?}");
+        let none = incompatibilities(&stored, &config(None));
+        assert!(none.len() == 1 && none[0].ends_with("random weights now"), "{none:?}");
+    }
 }
