@@ -955,6 +955,22 @@ fn train_starts_from_oidn_weights() {
     let exported = denoise(&tza, "exported.exr");
     let psnr = hush_eval::psnr(&exported, &ours).unwrap();
     assert!(psnr >= 45.0, "the exported TZA denoises {psnr:.1} dB away from the model");
+    // `--check` runs the written file in OIDN's own runtime on a noisy render (here a dataset's, its own
+    // auxiliary images beside it) and compares with hush's output; without the venv it says how to install it.
+    let model_file = run.join("model.safetensors");
+    let check = ["export", "--model", s(&model_file), "--out", s(&tza), "--check", s(&color)];
+    let out = Command::new(env!("CARGO_BIN_EXE_hush"))
+        .args(check)
+        .env("HUSH_BASELINES_PYTHON", dir.join("no-venv/bin/python"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && stderr.contains("cargo xtask baselines setup"), "{stderr}");
+    if hush_eval::external::venv_python().is_file() {
+        let out = hush(&check);
+        let (stdout, stderr) = (String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+        assert!(out.status.success() && stdout.starts_with("check passed"), "{stdout}\n{stderr}");
+    }
 
     let dsnn = dir.join("dsnn");
     expect_success(
@@ -1097,17 +1113,21 @@ fn noisy_renders_keep_their_own_features() {
     assert!(err.contains("aux: clean in the run, noisy now"), "{err}");
 }
 
-/// `hush denoise` without `--model` runs OIDN's official weights for the inputs it has (built in): a `hush
-/// render` EXR carries albedo and normal layers, so `rt_hdr_alb_nrm`; a color-only EXR gets `rt_hdr`.
+/// `hush denoise` without `--model` runs the built-in model for the inputs it has: a `hush render` EXR
+/// carries albedo and normal layers, so hush's shipped `hush_alb_nrm`; a color-only EXR gets OIDN's `rt_hdr`.
 #[test]
-fn denoise_without_a_model_uses_official_oidn_for_its_inputs() {
+fn denoise_without_a_model_uses_the_default_for_its_inputs() {
     let dir = scratch("default-model");
     let render = dir.join("box.exr");
     expect_success(&["render", s(&cbox()), "--spp", "4", "--width", "32", "--height", "32", "--out", s(&render)]);
     let out = dir.join("denoised.exr");
     let stderr = expect_success(&["denoise", "--color", s(&render), "--out", s(&out)]);
-    assert!(stderr.contains("model: oidn-2.5.1 rt_hdr_alb_nrm"), "{stderr}");
+    assert!(stderr.contains("model: hush_alb_nrm (shipped)"), "{stderr}");
     let denoised = hush_dataset::read_rgb(&out).unwrap();
+    let shipped = dir.join("shipped.exr");
+    let model = repo().join("data/models/hush_alb_nrm.safetensors");
+    expect_success(&["denoise", "--model", s(&model), "--color", s(&render), "--out", s(&shipped)]);
+    assert!(hush_dataset::read_rgb(&shipped).unwrap() == denoised, "the default is not data/models/hush_alb_nrm");
     assert_eq!((denoised.width, denoised.height, denoised.count_non_finite()), (32, 32, 0));
 
     let color = dir.join("color.exr");
@@ -1133,7 +1153,7 @@ fn denoise_reads_and_writes_pfm() {
     expect_success(&["denoise", "--color", s(&render), "--out", s(&from_exr)]);
     let [c, a, n] = [&paths[0], &paths[1], &paths[2]].map(|p| s(p));
     let stderr = expect_success(&["denoise", "--color", c, "--albedo", a, "--normal", n, "--out", s(&from_pfm)]);
-    assert!(stderr.contains("model: oidn-2.5.1 rt_hdr_alb_nrm"), "{stderr}");
+    assert!(stderr.contains("model: hush_alb_nrm (shipped)"), "{stderr}");
     assert_eq!(hush_dataset::read_pfm(&from_pfm).unwrap(), hush_dataset::read_rgb(&from_exr).unwrap());
     // A PFM color carries no feature layers: without the flags the model is color-only.
     let stderr = expect_success(&["denoise", "--color", c, "--out", s(&from_pfm)]);

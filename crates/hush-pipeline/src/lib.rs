@@ -53,6 +53,7 @@ mod probe;
 pub mod procedural;
 pub mod process;
 pub mod scene;
+pub mod shipped;
 pub mod train;
 
 pub use dataset::{BuildSummary, DatasetPlan};

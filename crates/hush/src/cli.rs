@@ -150,9 +150,9 @@ pub struct RenderArgs {
 
 #[derive(Args, Debug)]
 pub struct DenoiseArgs {
-    /// Trained model (.safetensors written by `hush train`, or OIDN's .tza weights) [default: OIDN 2.5.1's
-    /// official weights for the features given, built in: rt_hdr_alb_nrm with albedo and normal, rt_hdr_alb,
-    /// or rt_hdr for color only].
+    /// Trained model (.safetensors written by `hush train`, or OIDN's .tza weights) [default: built in, for the
+    /// features given: hush's shipped hush_alb_nrm with albedo and normal (data/models/, its card beside it),
+    /// else OIDN 2.5.1's official rt_hdr_alb with albedo, rt_hdr for color only].
     #[arg(long)]
     pub model: Option<PathBuf>,
     /// Noisy image: an RGB EXR, a multi-layer EXR from `hush render` whose layers then

@@ -5,7 +5,7 @@ use anyhow::{Context, Result, bail};
 use hush_dataset::{ExrImage, Image, read_exr, read_pfm, read_rgb, write_pfm, write_rgb};
 use hush_net::{Feature, InputFeatures};
 use hush_pipeline::Denoiser;
-use hush_pipeline::official::official_for;
+use hush_pipeline::shipped::default_for;
 
 use crate::cli::DenoiseArgs;
 
@@ -47,18 +47,18 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
     let (model, model_name) = match &args.model {
         Some(path) => (Denoiser::load_on(path, &device)?, path.display().to_string()),
         None => {
-            // Until a hush model beats OIDN's on held-out scenes (`cargo xtask train-default` measures it),
-            // the default is OIDN's official weights for the features at hand, built in (OIDN takes a normal
-            // only with an albedo).
+            // The shipped model for the features at hand where one beats OIDN on the held-out scenes
+            // (`cargo xtask train-default` measures it), else OIDN's official weights for them; both built in
+            // (OIDN takes a normal only with an albedo).
             let has = |f: Feature| given(f).is_some() || has_layer(f);
             let features = match (has(Feature::Albedo), has(Feature::Normal)) {
                 (true, true) => vec![Feature::Albedo, Feature::Normal],
                 (true, false) => vec![Feature::Albedo],
                 (false, _) => vec![],
             };
-            let weights = official_for(&InputFeatures { aux: features });
-            eprintln!("model: {} (built in; --model to choose another)", weights.method_name());
-            (Denoiser::official_on(&weights, &device)?, weights.method_name())
+            let model = default_for(&InputFeatures { aux: features });
+            eprintln!("model: {} (built in; --model to choose another)", model.name());
+            (model.denoiser_on(&device)?, model.name())
         }
     };
     for f in Feature::ALL.into_iter().filter(|f| given(*f).is_some() && !model.features().contains(f)) {
