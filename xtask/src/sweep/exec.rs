@@ -424,7 +424,7 @@ mod tests {
     use crate::sweep::spec::{parse_scales, parse_sweep};
 
     fn fixture() -> (Scale, Vec<Run>) {
-        let scales = "[tiny]\nscenes = [\"s.xml\"]\neval = { timing-runs = 1 }\n[small]\nscenes = [\"s\"]\n[thesis]\n\
+        let scales = "[tiny]\nscenes = [\"s.xml\"]\neval = { timing-runs = 1 }\n[small]\nscenes = [\"s\"]\n[medium]\nscenes = [\"s\"]\n[thesis]\n\
                       scenes = [\"s\"]\n";
         let scale = parse_scales(scales, Path::new("scales.toml")).unwrap().remove(0);
         let sweep = "[base]\nsteps = 2\n[[axis]]\nname = \"loss\"\nvariants = [{ name = \"a\", loss = \"l1\" }, \

@@ -20,7 +20,7 @@ use crate::args::{Flags, Takes};
 use crate::util::{Result, build_hush, ensure_vulkan, target_dir, write_atomic, write_atomic_with};
 
 pub const USAGE: &str =
-    "  sweep <name|all> [--scale tiny|small|thesis] [--jobs N] [--release] [--hush PATH] [--out DIR]
+    "  sweep <name|all> [--scale tiny|small|medium|thesis] [--jobs N] [--release] [--hush PATH] [--out DIR]
              [--list | --prepare | --run I | --emit slurm [--cpus-per-task N] | --collect]
                              the thesis's hyperparameter sweeps (data/sweeps/<name>.toml): resumable runs of
                              hush train + hush eval on N workers, or a Slurm job array; the report is

@@ -65,7 +65,7 @@ mod tests {
 
     #[test]
     fn a_plan_names_every_run_with_its_flags_and_folder() {
-        let scales = "[tiny]\nscenes=[\"a\"]\nseeds=[1, 2]\n[small]\nscenes=[\"a\"]\n[thesis]\nscenes=[\"a\"]\n";
+        let scales = "[tiny]\nscenes=[\"a\"]\nseeds=[1, 2]\n[small]\nscenes=[\"a\"]\n[medium]\nscenes=[\"a\"]\n[thesis]\nscenes=[\"a\"]\n";
         let scale = parse_scales(scales, Path::new("s.toml")).unwrap().remove(0);
         let text =
             "[[axis]]\nname = \"arch\"\nvariants = [{ name = \"oidn\" }, { name = \"dae\", arch = \"autoencoder\" }]";

@@ -9,7 +9,7 @@ use serde_json::{Map, Value};
 
 use crate::util::Result;
 
-pub const SCALES: [&str; 3] = ["tiny", "small", "thesis"];
+pub const SCALES: [&str; 4] = ["tiny", "small", "medium", "thesis"];
 
 /// `hush train` options a sweep may set (the flags without `--`; `dataset`, `out` and `seed` belong to
 /// the sweep itself).
@@ -426,6 +426,8 @@ seeds = [0, 1]
 [small]
 scenes = ["a"]
 record = "docs/results/sweeps-small/runs"
+[medium]
+scenes = ["m"]
 [thesis]
 scenes = ["b"]
 train = { steps = 100 }
@@ -531,7 +533,7 @@ variants = [{ name = "const", schedule = "constant" }, { name = "cosine", schedu
             ]
         );
         // One seed: no suffix; the thesis scale's steps survive because the sweep overrides only tiny.
-        let thesis = sweep.runs(&scales()[2]);
+        let thesis = sweep.runs(&scales()[3]);
         assert_eq!(thesis[0].name, "sgd-const");
         assert_eq!(thesis[0].train["steps"], 100);
         assert_eq!(thesis[0].train["lr"], 0.01);

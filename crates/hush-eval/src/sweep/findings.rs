@@ -242,7 +242,7 @@ pub fn claims(sweep: &str, results: &[RunResult]) -> Vec<Claim> {
                 "(Not in the thesis: Bako et al. 2017.) Predicting 5×5 kernels that filter the noisy color beats \
                  predicting the color, in the same steps (each run's seconds per epoch are in the report)",
                 "kpcn",
-                "oidn",
+                "direct",
                 Metric::Psnr,
             ));
             out.push(g.better(
