@@ -14,6 +14,12 @@ fn layer_name(f: Feature) -> &'static str {
     f.long_name()
 }
 
+/// The layer of a `hush render` EXR that holds feature `f`, where it has one.
+pub(crate) fn feature_layer(exr: &ExrImage, f: Feature) -> Option<Result<Image>> {
+    let prefix = format!("{}.", layer_name(f));
+    exr.channels.keys().any(|k| k.starts_with(&prefix)).then(|| Ok(exr.layer(layer_name(f))?))
+}
+
 /// Whether `path` names a PFM file (OIDN's format), by its extension; anything else is read as EXR.
 fn is_pfm(path: &std::path::Path) -> bool {
     path.extension().is_some_and(|e| e.eq_ignore_ascii_case("pfm"))
@@ -40,9 +46,8 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
         Feature::Specular => &args.specular,
         Feature::Variance => &args.variance,
     };
-    let has_layer = |f: Feature| {
-        exr.as_ref().is_some_and(|exr| exr.channels.keys().any(|k| k.starts_with(&format!("{}.", layer_name(f)))))
-    };
+    let layer = |f: Feature| exr.as_ref().and_then(|exr| feature_layer(exr, f));
+    let has_layer = |f: Feature| layer(f).is_some();
     let device = hush_pipeline::device(args.device.as_deref())?;
     let (model, model_name) = match &args.model {
         Some(path) => (Denoiser::load_on(path, &device)?, path.display().to_string()),
@@ -69,7 +74,7 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
         let given = given(f);
         let image = match given {
             Some(path) => read_image(path)?,
-            None if has_layer(f) => exr.as_ref().expect("has_layer found it").layer(layer_name(f))?,
+            None if has_layer(f) => layer(f).expect("has_layer found it")?,
             None => bail!(
                 "model {} needs --{} (its features are {}); {} has no '{}' layer either",
                 model_name,

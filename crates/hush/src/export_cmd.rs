@@ -52,7 +52,7 @@ pub fn run(args: ExportArgs) -> Result<()> {
         args.out.display()
     );
     if let Some(input) = &args.check {
-        check(&args, input, &info.features, &tza)?;
+        check(&args, input, &bytes, &info.features, &tza)?;
     }
     Ok(())
 }
@@ -64,10 +64,9 @@ fn read_input(path: &std::path::Path, features: &hush_net::InputFeatures) -> Res
     let exr = hush_dataset::read_exr(path).with_context(|| format!("reading {}", path.display()))?;
     let color = exr.layer("").with_context(|| format!("reading the color of {}", path.display()))?;
     let mut aux = Vec::new();
-    for f in &features.aux {
-        let layer = format!("{}.", f.long_name());
-        let image = if exr.channels.keys().any(|k| k.starts_with(&layer)) {
-            exr.layer(f.long_name())?
+    for &f in &features.aux {
+        let image = if let Some(layer) = crate::denoise_cmd::feature_layer(&exr, f) {
+            layer?
         } else if let Some(stem) = name.strip_suffix(".hdr.exr") {
             let beside = std::path::PathBuf::from(format!("{stem}.{}.exr", f.short_name()));
             hush_dataset::read_rgb(&beside).with_context(|| {
@@ -88,9 +87,15 @@ fn read_input(path: &std::path::Path, features: &hush_net::InputFeatures) -> Res
 }
 
 /// `--check`: the model run by hush and the written TZA run by OIDN's runtime agree on `input`.
-fn check(args: &ExportArgs, input: &std::path::Path, features: &hush_net::InputFeatures, tza: &[u8]) -> Result<()> {
+fn check(
+    args: &ExportArgs,
+    input: &std::path::Path,
+    model: &[u8],
+    features: &hush_net::InputFeatures,
+    tza: &[u8],
+) -> Result<()> {
     let (color, aux) = read_input(input, features)?;
-    let model = hush_pipeline::Denoiser::load(&args.model)?;
+    let model = hush_pipeline::Denoiser::from_bytes(model, false)?;
     let refs: Vec<&Image> = aux.iter().collect();
     let ours = model.denoise(&color, &refs)?;
     let inputs = [Input { color: &color, albedo: aux.first(), normal: aux.get(1) }];
