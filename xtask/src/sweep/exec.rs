@@ -157,8 +157,8 @@ pub fn run_one(hush: &Path, run: &Run, scale: &Scale, dataset: &Path, dir: &Path
         return Outcome::Skipped;
     }
     let outcome =
-        match run_inner(hush, run, scale, dataset, dir, threads).and_then(|s| Ok((record(run, scale, dir)?, s))) {
-            Ok(((), s)) => Outcome::Done(s),
+        match run_inner(hush, run, scale, dataset, dir, threads).and_then(|s| record(run, scale, dir).map(|()| s)) {
+            Ok(s) => Outcome::Done(s),
             Err(e) => Outcome::Failed(e),
         };
     drop(lock);
