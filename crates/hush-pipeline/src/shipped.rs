@@ -24,8 +24,8 @@ impl ShippedModel {
 }
 
 /// The shipped models that are the default for their inputs: those whose card shows them beating official
-/// OIDN on the held-out scenes (the bar of `cargo xtask train-default`). `hush_color` is shipped too but is
-/// not the default: color-only inputs still get OIDN's `rt_hdr` (see its card).
+/// OIDN on the held-out scenes (the bar of `cargo xtask train-default`). The color-only candidate does not
+/// meet it and is not shipped: color-only inputs still get OIDN's `rt_hdr`.
 pub const DEFAULTS: [ShippedModel; 1] = [ShippedModel {
     name: "hush_alb_nrm",
     aux: &[Feature::Albedo, Feature::Normal],
