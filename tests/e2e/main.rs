@@ -325,7 +325,9 @@ fn pipeline_runs_end_to_end() {
     let eval = ["eval", "--dataset", s(&ds), "--model", s(&model), "--out", s(&report), "--timing-runs", "1"];
     let err = expect_error(&[&eval[..], &["--baseline", "noisy,no-such-filter"]].concat());
     assert!(err.contains("unknown baseline 'no-such-filter'") && err.contains("noisy ("), "{err}");
-    expect_success(&[&eval[..], &["--baseline", "noisy", "--baseline", "guided"]].concat());
+    let err = expect_error(&[&eval[..], &["--device", "tpu"]].concat());
+    assert!(err.contains("unknown --device 'tpu': use cpu or cuda"), "{err}");
+    expect_success(&[&eval[..], &["--baseline", "noisy", "--baseline", "guided", "--device", "cpu"]].concat());
     check_eval_report(&report);
 }
 

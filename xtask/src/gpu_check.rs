@@ -77,9 +77,23 @@ fn find_gpu() -> Result<Gpu> {
         .ok_or_else(|| none("nvidia-smi lists none".into()))
 }
 
-/// hush built with `cuda` for `gpu`: the machine's nvcc where it has one, else NVIDIA's wheels.
-fn build(gpu: &Gpu) -> Result<PathBuf> {
-    let compute_cap = gpu.compute_cap.replace('.', "");
+/// The compute capability (`8.0` or `80`) to build CUDA kernels for: `CUDA_COMPUTE_CAP` where set, else the
+/// first GPU's; none on a machine without either (a cluster's login node: set the variable there).
+pub fn compute_cap() -> Result<String> {
+    if let Ok(cap) = std::env::var("CUDA_COMPUTE_CAP") {
+        return Ok(cap);
+    }
+    find_gpu().map(|gpu| gpu.compute_cap).map_err(|_| {
+        "no NVIDIA GPU here to build CUDA kernels for: set CUDA_COMPUTE_CAP to the GPUs' compute capability (80 for \
+         an A100, 90 for an H100)"
+            .to_string()
+    })
+}
+
+/// hush built `--release --features cuda` for `compute_cap` into `target/gpu-check/build` (the normal
+/// builds' caches stay valid): the machine's nvcc where it has one, else NVIDIA's wheels.
+pub fn build_cuda(compute_cap: &str) -> Result<PathBuf> {
+    let compute_cap = compute_cap.replace('.', "");
     let dir = target_dir().join("gpu-check").join("build");
     let mut cmd = Command::new(cargo());
     cmd.current_dir(project_root()).args(["build", "--release", "--package", "hush", "--features", "cuda"]);
@@ -298,7 +312,7 @@ pub fn run(args: &[String]) -> Result<()> {
     let start = Instant::now();
     let dir = target_dir().join("gpu-check");
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let hush = build(&gpu)?;
+    let hush = build_cuda(&gpu.compute_cap)?;
     let build_seconds = start.elapsed().as_secs_f64();
     let mut stages = serde_json::Map::new();
     for (name, stage) in [

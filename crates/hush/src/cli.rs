@@ -213,6 +213,9 @@ pub struct EvalArgs {
     /// of `hush train --validation`, to choose among models without looking at the test scenes.
     #[arg(long, value_delimiter = ',')]
     pub scenes: Vec<String>,
+    /// Where the networks run: cpu or cuda [default: cuda when hush is built with it, else cpu].
+    #[arg(long)]
+    pub device: Option<String>,
 }
 
 impl EvalArgs {
@@ -227,6 +230,7 @@ impl EvalArgs {
             aux: self.aux,
             official: !self.no_official,
             scenes: self.scenes,
+            device: self.device,
         }
     }
 }

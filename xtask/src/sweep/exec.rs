@@ -69,6 +69,11 @@ pub fn run_args(run: &Run, scale: &Scale, dataset: &Path, dir: &Path) -> (Vec<St
     eval.push(train_dir.join("model.safetensors").display().to_string());
     eval.extend(["--out".into(), dir.join("eval").display().to_string()]);
     eval.extend(flags(&scale.eval));
+    if let Some(device) = &scale.device {
+        for args in [&mut train, &mut eval] {
+            args.extend(["--device".into(), device.clone()]);
+        }
+    }
     (train, eval)
 }
 
@@ -593,6 +598,17 @@ mod tests {
                 "--timing-runs",
                 "1"
             ]
+        );
+        // A scale's device goes to both commands, after everything else.
+        let cuda = Scale { device: Some("cuda".into()), ..scale.clone() };
+        let (train_cuda, eval_cuda) = run_args(&runs[1], &cuda, Path::new("/d"), Path::new("/r/b"));
+        assert_eq!(
+            (&train_cuda[..train.len()], &train_cuda[train.len()..]),
+            (&train[..], &["--device".to_string(), "cuda".into()][..])
+        );
+        assert_eq!(
+            (&eval_cuda[..eval.len()], &eval_cuda[eval.len()..]),
+            (&eval[..], &["--device".to_string(), "cuda".into()][..])
         );
         let ds = dataset_args(&scale, Path::new("/o"));
         assert_eq!(ds[0], "dataset");

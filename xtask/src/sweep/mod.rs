@@ -21,7 +21,8 @@ use crate::util::{Result, build_hush, ensure_vulkan, target_dir, write_atomic, w
 
 pub const USAGE: &str =
     "  sweep <name|all> [--scale tiny|small|medium|thesis] [--jobs N] [--release] [--hush PATH] [--out DIR]
-             [--list | --prepare | --run I | --emit slurm [--cpus-per-task N] | --collect]
+             [--device cpu|cuda] [--list | --prepare | --run I | --emit slurm [--cpus-per-task N] [--gres G]
+             | --collect]
                              the thesis's hyperparameter sweeps (data/sweeps/<name>.toml): resumable runs of
                              hush train + hush eval on N workers, or a Slurm job array; the report is
                              target/sweeps/<name>/<scale>/report.md
@@ -42,6 +43,10 @@ struct Options {
     /// The sweeps' root folder [default: target/sweeps].
     out: Option<PathBuf>,
     cpus_per_task: Option<usize>,
+    /// `--device`: overrides the scale's `device`.
+    device: Option<String>,
+    /// `--gres`: the generic resources a Slurm task asks for [default: `gpu:1` on cuda, none on cpu].
+    gres: Option<String>,
     release: bool,
     action: Action,
 }
@@ -57,12 +62,14 @@ enum Action {
 }
 
 /// The flags of `sweep`; the actions are exclusive.
-const FLAGS: [(&str, Takes); 11] = [
+const FLAGS: [(&str, Takes); 13] = [
     ("--scale", Takes::Value),
     ("--jobs", Takes::Number),
     ("--hush", Takes::Value),
     ("--out", Takes::Value),
     ("--cpus-per-task", Takes::Number),
+    ("--device", Takes::Value),
+    ("--gres", Takes::Value),
     ("--release", Takes::Nothing),
     ("--list", Takes::Nothing),
     ("--prepare", Takes::Nothing),
@@ -98,6 +105,14 @@ fn parse(args: &[String]) -> Result<Options> {
             other => return Err(format!("--emit {other}: only `slurm` is supported")),
         },
     };
+    let device = flags.value("--device").map(String::from);
+    if let Some(d) = device.as_deref().filter(|d| !spec::is_device(d)) {
+        return Err(format!("--device {d}: use cpu or cuda"));
+    }
+    let gres = flags.value("--gres").map(String::from);
+    if gres.is_some() && action != Action::EmitSlurm {
+        return Err("--gres is a Slurm request: give it with --emit slurm".into());
+    }
     Ok(Options {
         name,
         scale: flags.value("--scale").unwrap_or("tiny").into(),
@@ -105,6 +120,8 @@ fn parse(args: &[String]) -> Result<Options> {
         hush: flags.value("--hush").map(PathBuf::from),
         out: flags.value("--out").map(PathBuf::from),
         cpus_per_task: positive("--cpus-per-task")?,
+        device,
+        gres,
         release: flags.has("--release"),
         action,
     })
@@ -119,13 +136,29 @@ fn stable_copy(exe: &Path, bin: &Path, name: &str) -> Result<PathBuf> {
     Ok(dest)
 }
 
-fn hush(o: &Options, layout: &Layout) -> Result<PathBuf> {
+/// The hush the runs use: `--hush`, else this workspace's, built with `cuda` (always `--release`) where the
+/// scale's networks run on CUDA.
+fn hush(o: &Options, scale: &Scale, layout: &Layout) -> Result<PathBuf> {
     match &o.hush {
         Some(p) if p.is_file() => Ok(p.clone()),
         Some(p) => Err(format!("--hush {}: no such file", p.display())),
+        None if is_cuda(scale) => {
+            let exe = crate::gpu_check::compute_cap()
+                .and_then(|cap| crate::gpu_check::build_cuda(&cap))
+                .map_err(|e| format!("--device cuda needs hush built with CUDA (or give one with --hush): {e}"))?;
+            // Beside the CPU build, which `--collect` makes: a running array must keep finding its CUDA one.
+            stable_copy(&exe, &layout.root.join("bin"), "hush-cuda")
+        }
         None => stable_copy(&build_hush(o.release)?, &layout.root.join("bin"), "hush"),
     }
 }
+
+fn is_cuda(scale: &Scale) -> bool {
+    scale.device.as_deref() == Some("cuda")
+}
+
+/// A Slurm task's default CPUs on a GPU: its data loading, evaluation metrics and process start run there.
+const CPUS_PER_GPU_TASK: usize = 4;
 
 /// Writes the Slurm job-array script of the sweep and returns its path.
 fn emit_slurm(o: &Options, scale: &Scale, runs: usize, layout: &Layout, hush: &Path) -> Result<PathBuf> {
@@ -144,7 +177,9 @@ fn emit_slurm(o: &Options, scale: &Scale, runs: usize, layout: &Layout, hush: &P
         xtask: &xtask,
         hush,
         dir: &dir,
-        cpus_per_task: o.cpus_per_task.unwrap_or(THREADS_PER_WORKER),
+        cpus_per_task: o.cpus_per_task.unwrap_or(if is_cuda(scale) { CPUS_PER_GPU_TASK } else { THREADS_PER_WORKER }),
+        gres: o.gres.clone().or_else(|| is_cuda(scale).then(|| "gpu:1".to_string())),
+        device: o.device.as_deref(),
         data_lock: &lock,
         out: &layout.root,
     });
@@ -163,7 +198,7 @@ fn slurm_selftest(mut o: Options) -> Result<()> {
     let sweeps = spec::load_sweeps(&defs, &o.name)?;
     let runs: Vec<Run> = sweeps.iter().flat_map(|s| s.runs(&scale)).collect();
     ensure_vulkan()?;
-    let hush = hush(&o, &layout)?;
+    let hush = hush(&o, &scale, &layout)?;
     // Start from no runs, so that the array really trains and evaluates them all (the dataset stays).
     let sweep_dir = layout.root.join(&o.name);
     if sweep_dir.exists() {
@@ -198,12 +233,16 @@ pub fn run(args: &[String]) -> Result<()> {
         return slurm_selftest(o);
     }
     let defs = spec::sweeps_dir();
-    let scale = spec::load_scale(&defs, &o.scale)?;
+    let mut scale = spec::load_scale(&defs, &o.scale)?;
+    if o.device.is_some() {
+        scale.device = o.device.clone();
+    }
     let sweeps = spec::load_sweeps(&defs, &o.name)?;
     let runs: Vec<Run> = sweeps.iter().flat_map(|s| s.runs(&scale)).collect();
     let layout = Layout { root: o.out.clone().unwrap_or_else(|| target_dir().join("sweeps")) };
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let workers = o.jobs.unwrap_or((cores / THREADS_PER_WORKER).max(1));
+    // One worker per GPU-less core, or one for the GPU (`--jobs` for a machine with several).
+    let workers = o.jobs.unwrap_or(if is_cuda(&scale) { 1 } else { (cores / THREADS_PER_WORKER).max(1) });
     let threads = (cores / workers).max(1);
 
     match o.action {
@@ -213,13 +252,17 @@ pub fn run(args: &[String]) -> Result<()> {
             }
             Ok(())
         }
-        Action::Collect => plan::report(&hush(&o, &layout)?, &sweeps, &scale, &runs, &layout),
+        Action::Collect => {
+            // The report needs no GPU: a plain build, also on a cluster's login node.
+            let cpu = Scale { device: None, ..scale.clone() };
+            plan::report(&hush(&o, &cpu, &layout)?, &sweeps, &scale, &runs, &layout)
+        }
         Action::Prepare => {
             ensure_vulkan()?;
-            exec::prepare_dataset(&hush(&o, &layout)?, &scale, &layout).map(drop)
+            exec::prepare_dataset(&hush(&o, &scale, &layout)?, &scale, &layout).map(drop)
         }
         Action::EmitSlurm => {
-            let script = emit_slurm(&o, &scale, runs.len(), &layout, &hush(&o, &layout)?)?;
+            let script = emit_slurm(&o, &scale, runs.len(), &layout, &hush(&o, &scale, &layout)?)?;
             println!("{}\nsubmit: sbatch {}", script.display(), script.display());
             println!("then:   cargo xtask sweep {} --scale {} --collect", o.name, scale.name);
             Ok(())
@@ -233,7 +276,7 @@ pub fn run(args: &[String]) -> Result<()> {
                     runs.len().saturating_sub(1)
                 )
             })?;
-            let hush = hush(&o, &layout)?;
+            let hush = hush(&o, &scale, &layout)?;
             let dataset = exec::prepare_dataset(&hush, &scale, &layout)?;
             let dir = layout.run(run, &scale.name);
             let threads = std::env::var("RAYON_NUM_THREADS").ok().and_then(|t| t.parse().ok()).unwrap_or(cores);
@@ -248,7 +291,7 @@ pub fn run(args: &[String]) -> Result<()> {
         }
         Action::Sweep => {
             ensure_vulkan()?;
-            let hush = hush(&o, &layout)?;
+            let hush = hush(&o, &scale, &layout)?;
             let start = std::time::Instant::now();
             let dataset = exec::prepare_dataset(&hush, &scale, &layout)?;
             eprintln!(
@@ -305,5 +348,9 @@ mod tests {
         assert!(parse(&args("all --jobs 0")).unwrap_err().contains("≥ 1"));
         assert!(parse(&args("--scale tiny")).unwrap_err().contains("usage"));
         assert!(parse(&args("all --emit pbs")).unwrap_err().contains("only `slurm`"));
+        let o = parse(&args("all --scale thesis --emit slurm --device cuda --gres gpu:a100:1")).unwrap();
+        assert_eq!((o.device.as_deref(), o.gres.as_deref()), (Some("cuda"), Some("gpu:a100:1")));
+        assert!(parse(&args("all --device tpu")).unwrap_err().contains("--device tpu: use cpu or cuda"));
+        assert!(parse(&args("all --gres gpu:1")).unwrap_err().contains("with --emit slurm"));
     }
 }

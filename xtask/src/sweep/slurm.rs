@@ -17,6 +17,10 @@ pub struct Job<'a> {
     /// Where the logs go (`slurm-<job>_<task>.out`).
     pub dir: &'a Path,
     pub cpus_per_task: usize,
+    /// `--gres` of each task (`gpu:1`), if any.
+    pub gres: Option<String>,
+    /// `--device` given to the sweep, passed on to each task (else the scale's own applies).
+    pub device: Option<&'a str>,
     pub data_lock: &'a Path,
     /// The sweeps' root folder (`--out`).
     pub out: &'a Path,
@@ -24,9 +28,11 @@ pub struct Job<'a> {
 
 /// The sbatch script.
 pub fn sbatch(job: &Job) -> String {
-    let Job { sweep, scale, runs, xtask, hush, dir, cpus_per_task, data_lock, out } = job;
+    let Job { sweep, scale, runs, xtask, hush, dir, cpus_per_task, gres, device, data_lock, out } = job;
     let (x, h, d, l, o) = (xtask.display(), hush.display(), dir.display(), data_lock.display(), out.display());
     let last = runs.saturating_sub(1);
+    let gres = gres.as_ref().map(|g| format!("#SBATCH --gres={g}\n")).unwrap_or_default();
+    let device = device.map(|d| format!(" --device {d}")).unwrap_or_default();
     format!(
         "#!/bin/bash
 # `cargo xtask sweep {sweep} --scale {scale}` as a Slurm job array: one task per run ({runs} runs).
@@ -37,11 +43,11 @@ pub fn sbatch(job: &Job) -> String {
 #SBATCH --array=0-{last}
 #SBATCH --cpus-per-task={cpus_per_task}
 #SBATCH --output={d}/slurm-%A_%a.out
-set -euo pipefail
+{gres}set -euo pipefail
 export RAYON_NUM_THREADS=\"${{SLURM_CPUS_PER_TASK:-{cpus_per_task}}}\"
 # The first task renders the scale's dataset; the others wait for it on the lock, then find it complete.
-flock {l} {x} sweep {sweep} --scale {scale} --out {o} --prepare --hush {h}
-exec {x} sweep {sweep} --scale {scale} --out {o} --run \"$SLURM_ARRAY_TASK_ID\" --hush {h}
+flock {l} {x} sweep {sweep} --scale {scale} --out {o} --prepare --hush {h}{device}
+exec {x} sweep {sweep} --scale {scale} --out {o} --run \"$SLURM_ARRAY_TASK_ID\" --hush {h}{device}
 "
     )
 }
@@ -60,6 +66,8 @@ mod tests {
             hush: Path::new("/s/bin/hush"),
             dir: Path::new("/s/loss/tiny/slurm"),
             cpus_per_task: 2,
+            gres: None,
+            device: None,
             data_lock: Path::new("/s/data/tiny.lock"),
             out: Path::new("/s"),
         });
@@ -77,5 +85,29 @@ mod tests {
         // The dataset comes before the run, and every #SBATCH line before the first command.
         assert!(script.find("--prepare").unwrap() < script.find("--run").unwrap());
         assert!(script.rfind("#SBATCH").unwrap() < script.find("set -euo").unwrap());
+        assert!(!script.contains("--gres") && !script.contains("--device"));
+    }
+
+    #[test]
+    fn gpu_tasks_ask_for_a_gpu_and_pass_the_device_on() {
+        let script = sbatch(&Job {
+            sweep: "all",
+            scale: "thesis",
+            runs: 3,
+            xtask: Path::new("/s/bin/xtask"),
+            hush: Path::new("/s/bin/hush-cuda"),
+            dir: Path::new("/s/all/thesis/slurm"),
+            cpus_per_task: 4,
+            gres: Some("gpu:a100:1".into()),
+            device: Some("cuda"),
+            data_lock: Path::new("/s/data/thesis.lock"),
+            out: Path::new("/s"),
+        });
+        assert!(script.contains("#SBATCH --gres=gpu:a100:1\n"), "{script}");
+        assert!(script.rfind("#SBATCH").unwrap() < script.find("set -euo").unwrap());
+        for command in ["--prepare", "--run"] {
+            let line = script.lines().find(|l| l.contains(command)).unwrap();
+            assert!(line.ends_with("--hush /s/bin/hush-cuda --device cuda"), "{line}");
+        }
     }
 }

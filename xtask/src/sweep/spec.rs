@@ -33,7 +33,6 @@ const TRAIN_KEYS: &[&str] = &[
     "augment",
     "eval-every",
     "clip-grad-norm",
-    "device",
 ];
 
 /// What every sweep shares at one scale.
@@ -53,6 +52,10 @@ pub struct Scale {
     /// Where each finished run's results are recorded (relative to the repository root unless absolute), so
     /// that a fresh clone skips them (`exec::record`); none for scales whose runs are cheap to redo.
     pub record: Option<PathBuf>,
+    /// Where `hush train` and `hush eval` run their networks (`cpu` or `cuda`; `None`: hush's defaults). Not a
+    /// train flag: where a run ran is not part of its identity, so a run recorded on a GPU restores on a CPU
+    /// machine and the other way round.
+    pub device: Option<String>,
 }
 
 impl Scale {
@@ -136,6 +139,13 @@ fn check_keys(map: &Map<String, Value>, allowed: &[&str], what: &str, file: &Pat
 fn train_flags(v: &Value, what: &str, file: &Path) -> Result<Map<String, Value>> {
     let map = table(v, what, file)?;
     for (key, value) in &map {
+        if key == "device" {
+            return Err(format!(
+                "{}: `device` in {what}: the device is set per scale (`device = \"cuda\"` in scales.toml) or by \
+                 `cargo xtask sweep --device`, not per run",
+                file.display()
+            ));
+        }
         if !TRAIN_KEYS.contains(&key.as_str()) {
             return Err(format!(
                 "{}: `{key}` in {what} is not a `hush train` option a sweep may set; use one of {} (dataset, out and \
@@ -182,6 +192,11 @@ pub fn flags(map: &Map<String, Value>) -> Vec<String> {
     out
 }
 
+/// Whether `name` is a device `hush train --device` and `hush eval --device` know.
+pub fn is_device(name: &str) -> bool {
+    matches!(name, "cpu" | "cuda")
+}
+
 /// Parses `scales.toml`.
 pub fn parse_scales(text: &str, file: &Path) -> Result<Vec<Scale>> {
     let root = toml_to_json(text, file)?;
@@ -198,7 +213,7 @@ pub fn parse_scales(text: &str, file: &Path) -> Result<Vec<Scale>> {
         let s = table(v, name, file)?;
         check_keys(
             &s,
-            &["description", "scenes", "dataset", "train", "eval", "seeds", "record"],
+            &["description", "scenes", "dataset", "train", "eval", "seeds", "record", "device"],
             &format!("[{name}]"),
             file,
         )?;
@@ -206,6 +221,11 @@ pub fn parse_scales(text: &str, file: &Path) -> Result<Vec<Scale>> {
             None => None,
             Some(Value::String(r)) if !r.is_empty() => Some(PathBuf::from(r)),
             Some(_) => return Err(format!("{}: [{name}] record must be a folder path", file.display())),
+        };
+        let device = match s.get("device") {
+            None => None,
+            Some(Value::String(d)) if is_device(d) => Some(d.clone()),
+            Some(d) => return Err(format!("{}: [{name}] device {d}: use \"cpu\" or \"cuda\"", file.display())),
         };
         let scenes = match s.get("scenes") {
             Some(Value::Array(a)) if !a.is_empty() => a
@@ -235,7 +255,7 @@ pub fn parse_scales(text: &str, file: &Path) -> Result<Vec<Scale>> {
                 .ok_or_else(|| format!("{}: [{name}] seeds must be non-negative integers", file.display()))?,
             Some(_) => return Err(format!("{}: [{name}] seeds must be a non-empty list of integers", file.display())),
         };
-        scales.push(Scale { name: name.into(), scenes, dataset, train, eval, seeds, record });
+        scales.push(Scale { name: name.into(), scenes, dataset, train, eval, seeds, record, device });
     }
     Ok(scales)
 }
@@ -431,6 +451,7 @@ scenes = ["m"]
 [thesis]
 scenes = ["b"]
 train = { steps = 100 }
+device = "cuda"
 "#;
 
     const SWEEP_TOML: &str = r#"
@@ -491,6 +512,13 @@ variants = [{ name = "const", schedule = "constant" }, { name = "cosine", schedu
         assert!(s[1].record_of(&run).unwrap().ends_with("docs/results/sweeps-small/runs/loss/base"));
         let bad = SCALES_TOML.replace("record = \"docs/results/sweeps-small/runs\"", "record = 3");
         assert!(parse_scales(&bad, Path::new("scales.toml")).unwrap_err().contains("record must be a folder path"));
+        assert_eq!((s[1].device.as_deref(), s[3].device.as_deref()), (None, Some("cuda")));
+        let bad = SCALES_TOML.replace("device = \"cuda\"", "device = \"tpu\"");
+        assert!(
+            parse_scales(&bad, Path::new("scales.toml"))
+                .unwrap_err()
+                .contains("device \"tpu\": use \"cpu\" or \"cuda\"")
+        );
     }
 
     #[test]
@@ -553,6 +581,7 @@ variants = [{ name = "const", schedule = "constant" }, { name = "cosine", schedu
         let err = |text: &str| parse_sweep("x", text, Path::new("x.toml")).unwrap_err();
         assert!(err("[base]\nlearning-rate = 1").contains("x.toml: `learning-rate` in [base] is not a `hush train`"));
         assert!(err("[base]\nseed = 1").contains("set by the sweep"));
+        assert!(err("[base]\ndevice = \"cuda\"").contains("the device is set per scale"));
         assert!(err("[scale.huge]\nlr = 1").contains("scale `huge` in the sweep: no such scale"));
         assert!(err("[[axis]]\nname = \"a\"\nvariants = [{ lr = 1 }]").contains("needs `name"));
         assert!(err("[[axis]]\nname = \"a\"\nvariants = []").contains("axis `a` has no variants"));

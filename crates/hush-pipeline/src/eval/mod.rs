@@ -48,6 +48,8 @@ pub struct EvalPlan {
     /// out of training as a validation split (`hush train --validation`) choose among models without the test
     /// scenes seeing the choice. Empty: the test split.
     pub scenes: Vec<String>,
+    /// Where the networks run: `cpu` or `cuda` ([`crate::device`]; `None`: CUDA when built with it).
+    pub device: Option<String>,
 }
 
 impl EvalPlan {
@@ -65,6 +67,7 @@ impl EvalPlan {
             aux: AuxSource::default(),
             official: true,
             scenes: Vec::new(),
+            device: None,
         }
     }
 }
@@ -95,11 +98,12 @@ fn evaluated_views(manifest: &Manifest, plan: &EvalPlan) -> Result<Vec<hush_data
 pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
     let manifest = Manifest::load(&plan.dataset)?;
     let views = evaluated_views(&manifest, plan)?;
+    let device = crate::device(plan.device.as_deref())?;
     let mut report = Report::default();
     let mut methods: Vec<Box<dyn Method>> = vec![Box::new(Noisy)];
     let mut sets: Vec<hush_net::InputFeatures> = Vec::new();
     for path in &plan.models {
-        let (name, denoiser) = (method_name(path), Denoiser::load(path)?);
+        let (name, denoiser) = (method_name(path), Denoiser::load_on(path, &device)?);
         let info = &denoiser.info;
         report.notes.push(format!("Model {name}: {} on features {}.", info.net.describe(), info.features));
         if !sets.contains(&info.features) {
@@ -124,7 +128,10 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
                 weights.method_name(),
                 weights.features()
             ));
-            methods.push(Box::new(Model { name: weights.method_name(), denoiser: Denoiser::official(&weights)? }));
+            methods.push(Box::new(Model {
+                name: weights.method_name(),
+                denoiser: Denoiser::official_on(&weights, &device)?,
+            }));
         }
     }
     let all: Vec<String> = BASELINES.iter().map(|(name, _)| name.to_string()).collect();
