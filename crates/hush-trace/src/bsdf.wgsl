@@ -316,43 +316,42 @@ fn plastic_transmittance(m: Material, cos_theta: f32) -> f32 {
 }
 
 // Probability of sampling the coat: its reflectance × the specular sampling weight, against
-// the base's transmittance × the diffuse weight.
-fn rough_plastic_coat_prob(m: Material, cos_o: f32) -> f32 {
-    let t = plastic_transmittance(m, cos_o);
-    let ps = (1.0 - t) * m.d.w;
-    let pd = t * (1.0 - m.d.w);
+// the base's transmittance × the diffuse weight; `t_o` is plastic_transmittance(m, cos θo).
+fn rough_plastic_coat_prob(m: Material, t_o: f32) -> f32 {
+    let ps = (1.0 - t_o) * m.d.w;
+    let pd = t_o * (1.0 - m.d.w);
     return ps / (ps + pd);
 }
 
-// f·cos θi of both lobes, wo and wi above the surface.
-fn rough_plastic_eval(m: Material, wo: vec3<f32>, wi: vec3<f32>) -> vec3<f32> {
+// f·cos θi of both lobes (xyz) and the density with which rough_plastic_sample produces wi (w), wo
+// and wi above the surface; `t_o` is plastic_transmittance(m, wo.z). One function for both, since
+// next-event estimation needs both and they share the half vector, D, G1 and the table lookup.
+fn rough_plastic_eval_pdf(m: Material, wo: vec3<f32>, wi: vec3<f32>, t_o: f32) -> vec4<f32> {
     let alpha = m.a.w;
     let bk = mf_beckmann(m);
     let eta = m.b.w;
     let h = normalize(wo + wi);
     let f = fresnel_dielectric(dot(wo, h), eta).r;
-    let g = mf_g1(wo, h, alpha, bk) * mf_g1(wi, h, alpha, bk);
-    let coat = m.b.xyz * (f * mf_d(h, alpha, bk) * g / (4.0 * wo.z));
+    let d = mf_d(h, alpha, bk);
+    let g1_o = mf_g1(wo, h, alpha, bk);
+    let coat = m.b.xyz * (f * d * (g1_o * mf_g1(wi, h, alpha, bk)) / (4.0 * wo.z));
     var base = m.a.xyz;
     if (mat_flags(m) & FLAG_NONLINEAR) != 0u {
         base = base / (vec3<f32>(1.0) - base * m.e.z);
     } else {
         base = base / (1.0 - m.e.z);
     }
-    let t = plastic_transmittance(m, wo.z) * plastic_transmittance(m, wi.z);
-    return coat + base * (INV_PI / (eta * eta) * wi.z * t);
-}
-
-fn rough_plastic_pdf(m: Material, wo: vec3<f32>, wi: vec3<f32>) -> f32 {
-    let ps = rough_plastic_coat_prob(m, wo.z);
-    let h = normalize(wo + wi);
-    let coat = mf_pdf_visible(wo, h, m.a.w, mf_beckmann(m)) / (4.0 * dot(wo, h));
-    return ps * coat + (1.0 - ps) * wi.z * INV_PI;
+    let t = t_o * plastic_transmittance(m, wi.z);
+    let value = coat + base * (INV_PI / (eta * eta) * wi.z * t);
+    let ps = rough_plastic_coat_prob(m, t_o);
+    let coat_pdf = d * g1_o * abs(dot(wo, h)) / abs(wo.z) / (4.0 * dot(wo, h));
+    return vec4<f32>(value, ps * coat_pdf + (1.0 - ps) * wi.z * INV_PI);
 }
 
 fn rough_plastic_sample(m: Material, wo: vec3<f32>, u: vec2<f32>, u_lobe: f32) -> BsdfSample {
+    let t_o = plastic_transmittance(m, wo.z);
     var wi = vec3<f32>(0.0);
-    if u_lobe < rough_plastic_coat_prob(m, wo.z) {
+    if u_lobe < rough_plastic_coat_prob(m, t_o) {
         wi = reflect_local(wo, mf_sample_visible(wo, m.a.w, mf_beckmann(m), u));
     } else {
         wi = cosine_local(u);
@@ -360,11 +359,11 @@ fn rough_plastic_sample(m: Material, wo: vec3<f32>, u: vec2<f32>, u_lobe: f32) -
     if wi.z <= 0.0 {
         return no_sample();
     }
-    let pdf = rough_plastic_pdf(m, wo, wi);
-    if !(pdf > 0.0) {
+    let fp = rough_plastic_eval_pdf(m, wo, wi, t_o);
+    if !(fp.w > 0.0) {
         return no_sample();
     }
-    return BsdfSample(wi, rough_plastic_eval(m, wo, wi) / pdf, pdf, false, true);
+    return BsdfSample(wi, fp.xyz / fp.w, fp.w, false, true);
 }
 
 // ---- rough dielectric (Mitsuba's roughdielectric, visible normals) ----
@@ -394,24 +393,30 @@ fn rough_half(m: Material, wo: vec3<f32>, wi: vec3<f32>) -> RoughHalf {
     return RoughHalf(h, eta, reflect, valid);
 }
 
-fn rough_dielectric_eval(m: Material, wo: vec3<f32>, wi: vec3<f32>) -> vec3<f32> {
+// f·|cos θi| (xyz) and the density with which rough_dielectric_sample produces wi (w).
+fn rough_dielectric_eval_pdf(m: Material, wo: vec3<f32>, wi: vec3<f32>) -> vec4<f32> {
     let rh = rough_half(m, wo, wi);
     if !rh.valid {
-        return vec3<f32>(0.0);
+        return vec4<f32>(0.0);
     }
     let alpha = m.a.w;
     let bk = mf_beckmann(m);
     let d = mf_d(rh.h, alpha, bk);
-    let g = mf_g1(wo, rh.h, alpha, bk) * mf_g1(wi, rh.h, alpha, bk);
+    // G1 and the visible-normal density are even in wo, so wo stands for rough_dielectric_pdf's wo_up.
+    let g1_o = mf_g1(wo, rh.h, alpha, bk);
+    let g = g1_o * mf_g1(wi, rh.h, alpha, bk);
     let f = fresnel_dielectric(dot(wo, rh.h), m.b.w).r;
-    if rh.reflect {
-        return m.a.xyz * (f * d * g / (4.0 * abs(wo.z)));
-    }
-    // Transmission; radiance compression by 1 / eta² cancels the Jacobian's eta².
     let dwo = dot(wo, rh.h);
     let dwi = dot(wi, rh.h);
+    let visible = d * g1_o * abs(dwo) / abs(wo.z);
+    if rh.reflect {
+        let value = m.a.xyz * (f * d * g / (4.0 * abs(wo.z)));
+        return vec4<f32>(value, visible * f * (1.0 / (4.0 * abs(dwi))));
+    }
+    // Transmission; radiance compression by 1 / eta² cancels the Jacobian's eta².
     let denom = dwo + rh.eta * dwi;
-    return m.b.xyz * ((1.0 - f) * abs(d * g * dwo * dwi / (wo.z * denom * denom)));
+    let value = m.b.xyz * ((1.0 - f) * abs(d * g * dwo * dwi / (wo.z * denom * denom)));
+    return vec4<f32>(value, visible * (1.0 - f) * (rh.eta * rh.eta * abs(dwi) / (denom * denom)));
 }
 
 fn rough_dielectric_pdf(m: Material, wo: vec3<f32>, wi: vec3<f32>) -> f32 {
@@ -469,75 +474,57 @@ fn front_frame(m: Material, wo: vec3<f32>, wi: vec3<f32>) -> mat2x3<f32> {
     return mat2x3<f32>(wo, wi);
 }
 
-// f·|cos θi| of the non-delta lobes.
-fn bsdf_eval(m: Material, wo_in: vec3<f32>, wi_in: vec3<f32>) -> vec3<f32> {
+// f·|cos θi| of the non-delta lobes (xyz) and the solid-angle density with which bsdf_sample
+// produces wi through one of them (w): next-event estimation needs both, so they share one pass
+// through the material's kind (on a SIMD CPU every kind present in a batch of lanes runs).
+fn bsdf_eval_pdf(m: Material, wo_in: vec3<f32>, wi_in: vec3<f32>) -> vec4<f32> {
     let kind = mat_kind(m);
     if HAS_ROUGH_DIELECTRIC && kind == KIND_DIELECTRIC && m.a.w > 0.0 {
-        return rough_dielectric_eval(m, wo_in, wi_in);
+        return rough_dielectric_eval_pdf(m, wo_in, wi_in);
     }
     if kind == KIND_DIELECTRIC || kind == KIND_THIN_DIELECTRIC {
-        return vec3<f32>(0.0);
+        return vec4<f32>(0.0);
     }
     let f = front_frame(m, wo_in, wi_in);
     let wo = f[0];
     let wi = f[1];
     if wo.z <= 0.0 || wi.z <= 0.0 {
-        return vec3<f32>(0.0);
+        return vec4<f32>(0.0);
     }
     if kind == KIND_DIFFUSE {
-        return m.a.xyz * INV_PI * wi.z;
+        return vec4<f32>(m.a.xyz * INV_PI * wi.z, wi.z * INV_PI);
     }
     if kind == KIND_CONDUCTOR {
         let alpha = m.a.w;
         if alpha == 0.0 {
-            return vec3<f32>(0.0);
+            return vec4<f32>(0.0);
         }
         let bk = mf_beckmann(m);
         let h = normalize(wo + wi);
-        let g = mf_g1(wo, h, alpha, bk) * mf_g1(wi, h, alpha, bk);
+        let d = mf_d(h, alpha, bk);
+        let g1_o = mf_g1(wo, h, alpha, bk);
+        let g = g1_o * mf_g1(wi, h, alpha, bk);
         let fr = fresnel_conductor(dot(wo, h), m.c.xyz, m.d.xyz) * m.a.xyz;
-        return fr * mf_d(h, alpha, bk) * g / (4.0 * wo.z);
+        let pdf = d * g1_o * abs(dot(wo, h)) / abs(wo.z) / (4.0 * dot(wo, h));
+        return vec4<f32>(fr * d * g / (4.0 * wo.z), pdf);
     }
     if HAS_ROUGH_PLASTIC && m.a.w > 0.0 {
-        return rough_plastic_eval(m, wo, wi);
+        return rough_plastic_eval_pdf(m, wo, wi, plastic_transmittance(m, wo.z));
     }
     // Plastic: only the diffuse base is non-delta.
-    return plastic_diffuse(m, wo.z, wi.z) * INV_PI * wi.z;
-}
-
-// Solid-angle density with which bsdf_sample produces wi through a non-delta lobe.
-fn bsdf_pdf(m: Material, wo_in: vec3<f32>, wi_in: vec3<f32>) -> f32 {
-    let kind = mat_kind(m);
-    if HAS_ROUGH_DIELECTRIC && kind == KIND_DIELECTRIC && m.a.w > 0.0 {
-        return rough_dielectric_pdf(m, wo_in, wi_in);
-    }
-    if kind == KIND_DIELECTRIC || kind == KIND_THIN_DIELECTRIC {
-        return 0.0;
-    }
-    let f = front_frame(m, wo_in, wi_in);
-    let wo = f[0];
-    let wi = f[1];
-    if wo.z <= 0.0 || wi.z <= 0.0 {
-        return 0.0;
-    }
-    if kind == KIND_DIFFUSE {
-        return wi.z * INV_PI;
-    }
-    if kind == KIND_CONDUCTOR {
-        let alpha = m.a.w;
-        if alpha == 0.0 {
-            return 0.0;
-        }
-        let h = normalize(wo + wi);
-        return mf_pdf_visible(wo, h, alpha, mf_beckmann(m)) / (4.0 * dot(wo, h));
-    }
-    if HAS_ROUGH_PLASTIC && m.a.w > 0.0 {
-        return rough_plastic_pdf(m, wo, wi);
-    }
     let f_o = fresnel_dielectric(wo.z, m.b.w).r;
     let p_spec = f_o * m.d.w;
     let p_diff = (1.0 - f_o) * (1.0 - m.d.w);
-    return p_diff / (p_spec + p_diff) * wi.z * INV_PI;
+    let pdf = p_diff / (p_spec + p_diff) * wi.z * INV_PI;
+    return vec4<f32>(plastic_diffuse(m, wo.z, wi.z) * INV_PI * wi.z, pdf);
+}
+
+fn bsdf_eval(m: Material, wo: vec3<f32>, wi: vec3<f32>) -> vec3<f32> {
+    return bsdf_eval_pdf(m, wo, wi).xyz;
+}
+
+fn bsdf_pdf(m: Material, wo: vec3<f32>, wi: vec3<f32>) -> f32 {
+    return bsdf_eval_pdf(m, wo, wi).w;
 }
 
 // Samples wi given wo; `u` drives the direction, `u_lobe` the choice between lobes.

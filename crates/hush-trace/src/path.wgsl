@@ -614,7 +614,8 @@ fn bounce(st: ptr<function, PathState>) -> bool {
         let wi_local = to_local * wi;
         // The shading and geometric normals must agree on the side wi leaves from.
         if light_pdf > 0.0 && dot(ng, wi) * wi_local.z > 0.0 {
-            let f = bsdf_eval(mat, wo, wi_local);
+            let fp = bsdf_eval_pdf(mat, wo, wi_local);
+            let f = fp.xyz;
             if any(f > vec3<f32>(0.0)) && any(radiance > vec3<f32>(0.0)) {
                 let origin = offset_origin(p, ng, wi);
                 // Shadow rays to a triangle light end just short of it.
@@ -625,7 +626,7 @@ fn bounce(st: ptr<function, PathState>) -> bool {
                     t_max = length(lp - origin) * (1.0 - 1e-4);
                 }
                 if !occluded(origin, shadow_d, t_max) {
-                    let weight = power_heuristic(light_pdf, bsdf_pdf(mat, wo, wi_local));
+                    let weight = power_heuristic(light_pdf, fp.w);
                     (*st).out.radiance += throughput * f * radiance * weight / light_pdf;
                 }
             }
