@@ -124,7 +124,8 @@ fn precondition_section(doc: &mut Document, results: &[RunResult]) {
         )
     } else {
         format!(
-            "Precondition fails for {} of {} run groups, whose quality findings are inconclusive (undertrained): {}.",
+            "Precondition: {} of {} run groups do not beat the noisy input at every test spp; a quality finding is \
+             inconclusive (undertrained) where none of the groups it compares does: {}.",
             short.len(),
             names.len(),
             short.join("; ")
@@ -416,9 +417,10 @@ pub fn claims_section(doc: &mut Document, claims: &[Claim]) {
         )),
         code("done.json"),
         plain(
-            " records the load average). Precondition: a quality claim is decided only where every run it compares \
-             beats the noisy input at every test spp (mean PSNR over the test views, spp by spp); otherwise it is \
-             inconclusive: undertrained, and says which run fell short where.",
+            " records the load average). Precondition: a model group is worth using where each of its runs beats \
+             the noisy input at every test spp (mean PSNR over the test views, spp by spp). A quality claim none of \
+             whose compared groups is worth using is inconclusive: undertrained; where some are, it is decided and \
+             names the runs that fell short where.",
         ),
     ]));
     let header = ["sweep", "thesis", "measured", "verdict"].map(String::from).to_vec();
