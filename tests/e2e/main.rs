@@ -808,8 +808,13 @@ fn train_resumes_exactly_after_sigkill() {
     let err = expect_error(&["train", "--resume", s(&killed), "--width", "0.25"]);
     assert!(err.contains("width") && err.contains("0.125") && err.contains("0.25"), "{err}");
 
+    // What a kill during an atomic write leaves (`.<file>.<pid>.<n>.tmp`): the resumed run removes it.
+    let stale =
+        [killed.join(".best.safetensors.4000000.7.tmp"), killed.join("checkpoints/.last.safetensors.4000000.8.tmp")];
+    stale.iter().for_each(|t| std::fs::write(t, b"partial").unwrap());
     let stderr = expect_success(&["train", "--resume", s(&killed)]);
     assert!(stderr.contains("resuming"), "{stderr}");
+    assert!(stale.iter().all(|t| !t.exists()), "a killed write's temporary file survived the resumed run");
     assert_eq!(loss_columns(&killed), loss_columns(&full));
     assert_eq!(loss_columns(&full).len(), 401);
     assert_eq!(

@@ -22,6 +22,9 @@ use crate::util::{Result, build_hush, ensure_vulkan, project_root, target_dir};
 
 pub const USAGE: &str = "cargo xtask soak [--kills N] [--seed S] [--release]";
 
+/// Kills every stage gets at least, given 3 × stages kills or more.
+const MIN_STAGE_KILLS: u32 = 3;
+
 /// A stage's command line, given the folder the pipeline runs in.
 type StageArgs = Box<dyn Fn(&Path) -> Vec<String>>;
 
@@ -59,9 +62,13 @@ pub fn run(args: &[String]) -> Result<()> {
         eprintln!("xtask soak: {} uninterrupted in {:.1} s", stage.name, seconds[seconds.len() - 1]);
     }
 
-    // The same pipeline, killed `kills` times: each stage's share by its measured time.
+    // The same pipeline, killed `kills` times: each stage at least MIN_STAGE_KILLS times where there are
+    // kills enough (the sweep is the shortest stage, and its resumption is what the sweep's acceptance
+    // asks about), the rest by each stage's measured time.
     let total: f64 = seconds.iter().sum();
-    let mut shares: Vec<u32> = seconds.iter().map(|s| ((s / total) * f64::from(kills)).floor() as u32).collect();
+    let floor = if kills as usize >= MIN_STAGE_KILLS as usize * seconds.len() { MIN_STAGE_KILLS } else { 0 };
+    let rest = f64::from(kills - floor * seconds.len() as u32);
+    let mut shares: Vec<u32> = seconds.iter().map(|s| floor + ((s / total) * rest).floor() as u32).collect();
     // The kills the floor left over, one each to the stages in turn.
     let given: u32 = shares.iter().sum();
     let n = shares.len();

@@ -162,6 +162,14 @@ pub fn run(options: TrainOptions, observer: &dyn Observer) -> Result<TrainOutcom
         Some(lock) => lock,
         None => lock_run()?,
     };
+    // Temporary files of writes that a killed run of this folder left behind (this run holds its lock).
+    for dir in [out.as_path(), checkpoints.as_path()] {
+        for tmp in hush_dataset::temp_files(dir)? {
+            if tmp.file_name().and_then(|n| n.to_str()).and_then(hush_dataset::temp_target).is_some() {
+                std::fs::remove_file(&tmp).with_context(|| format!("removing {}", tmp.display()))?;
+            }
+        }
+    }
     write_file(&folder.config(), serde_json::to_string_pretty(&cfg)?.as_bytes())?;
 
     let (mut log, mut metrics) = (Vec::new(), Vec::new());
