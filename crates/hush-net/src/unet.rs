@@ -664,25 +664,24 @@ fn apply_kernels_cpu(logits: &Tensor, color: &Tensor, size: usize) -> Result<Ten
     rows.par_chunks_mut(c * w).enumerate().for_each(|(row, out)| {
         let (b, y) = (row / h, row % h);
         let (lb, xb) = (&l[b * k * hw..(b + 1) * k * hw], &x[b * c * hw..(b + 1) * c * hw]);
-        let mut weights = vec![0f32; k];
+        // Each tap's weight and source pixel, computed once per pixel for every channel.
+        let (mut weights, mut sources) = (vec![0f32; k], vec![0usize; k]);
         for px in 0..w {
             let at = y * w + px;
             let max = (0..k).map(|t| lb[t * hw + at]).fold(f32::NEG_INFINITY, f32::max);
             let mut sum = 0f32;
-            for (t, wt) in weights.iter_mut().enumerate() {
+            for (t, (wt, src)) in weights.iter_mut().zip(&mut sources).enumerate() {
                 *wt = (lb[t * hw + at] - max).exp();
                 sum += *wt;
+                // The nearest edge pixel outside the image, as `pad_with_same`.
+                let sy = (y as isize + (t / size) as isize - r).clamp(0, h as isize - 1) as usize;
+                let sx = (px as isize + (t % size) as isize - r).clamp(0, w as isize - 1) as usize;
+                *src = sy * w + sx;
             }
+            weights.iter_mut().for_each(|wt| *wt /= sum);
             for ch in 0..c {
                 let plane = &xb[ch * hw..(ch + 1) * hw];
-                let mut acc = 0f32;
-                for (t, wt) in weights.iter().enumerate() {
-                    // The nearest edge pixel outside the image, as `pad_with_same`.
-                    let sy = (y as isize + (t / size) as isize - r).clamp(0, h as isize - 1) as usize;
-                    let sx = (px as isize + (t % size) as isize - r).clamp(0, w as isize - 1) as usize;
-                    acc += plane[sy * w + sx] * (wt / sum);
-                }
-                out[ch * w + px] = acc;
+                out[ch * w + px] = weights.iter().zip(&sources).fold(0f32, |acc, (wt, &src)| acc + plane[src] * wt);
             }
         }
     });
