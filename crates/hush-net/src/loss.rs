@@ -171,6 +171,28 @@ impl LossSpace {
     }
 }
 
+/// The floor of [`color_mean`]'s denominator: a channel's image mean in the evaluation's display space below
+/// it (a nearly black crop) counts its difference in absolute terms rather than relative ones.
+pub const COLOR_MEAN_FLOOR: f64 = 0.01;
+
+/// The colour-mean term: per image and channel, the squared relative difference of the image means of `x`
+/// and `y` (NCHW, means over H and W), `((mean(x) − mean(y)) / (mean(y) + `[`COLOR_MEAN_FLOOR`]`))²`, averaged
+/// over images and channels: zero exactly when each channel's mean is the target's. Weighted beside a per-pixel
+/// loss it pulls what per-pixel losses leave free, the brightness of a whole crop (a kernel that drops a crop's
+/// fireflies, or an L1 loss that prefers the median to the mean where the noise is skewed, shifts the image
+/// mean; the colour-cast guards measure exactly this on the display images). Squared, so that what minimizes it
+/// over noisy crops is each crop mean's conditional *mean* (unbiased image means), not its median: with the
+/// absolute difference the skewed spread of a 1-spp crop's mean pulls towards a biased median.
+pub fn color_mean(x: &Tensor, y: &Tensor) -> Result<Tensor> {
+    check_same_shape("color_mean", x, y)?;
+    if x.rank() != 4 {
+        bail!("color_mean: expected NCHW tensors, got {:?}", x.dims())
+    }
+    let means = |t: &Tensor| t.mean_keepdim(3)?.mean_keepdim(2);
+    let (mx, my) = (means(x)?, means(y)?);
+    ((mx - &my)? / (my + COLOR_MEAN_FLOOR)?)?.sqr()?.mean_all()
+}
+
 fn check_same_shape(op: &str, x: &Tensor, y: &Tensor) -> Result<()> {
     if x.dims() != y.dims() {
         bail!("{op}: shapes differ: prediction {:?} vs target {:?}", x.dims(), y.dims())

@@ -20,6 +20,10 @@ pub struct TrainConfig {
     /// Where the loss compares output and target; absent from configurations written before it existed.
     #[serde(default, skip_serializing_if = "LossSpace::is_transfer")]
     pub loss_space: LossSpace,
+    /// The weight of [`hush_net::loss::color_mean`] added to the loss, measured on the evaluation's display
+    /// images whatever the loss space (0: none; absent from configurations written before it existed).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub color_mean: f64,
     pub optimizer: OptimizerConfig,
     /// The base learning rate the schedule scales (the thesis: 1e-4, constant; for one-cycle the maximum).
     pub lr: f64,
@@ -49,6 +53,10 @@ pub struct TrainConfig {
     /// the training scenes themselves.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub trainable: Vec<String>,
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 /// Which trained weights a run started from, as `config.json` records it: enough to tell whether a resumed
@@ -81,6 +89,7 @@ impl TrainConfig {
             net,
             loss: Loss::Mix,
             loss_space: LossSpace::Transfer,
+            color_mean: 0.0,
             optimizer: OptimizerConfig::adam(),
             lr: 1e-4,
             schedule: Schedule::Constant,
@@ -122,6 +131,9 @@ impl TrainConfig {
         }
         if self.crop == 0 || !self.crop.is_multiple_of(ALIGNMENT) {
             return bad(format!("crop must be a non-zero multiple of {ALIGNMENT}, got {}", self.crop));
+        }
+        if !(self.color_mean.is_finite() && self.color_mean >= 0.0) {
+            return bad(format!("the colour-mean weight must be finite and ≥ 0, got {}", self.color_mean));
         }
         if let Some(c) = self.clip_grad_norm
             && !(c.is_finite() && c > 0.0)

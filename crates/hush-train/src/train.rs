@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use candle_core::{DType, Device, Module, Tensor};
 use candle_nn::{VarBuilder, VarMap};
-use hush_net::{ALIGNMENT, Net, Pretrained, hwc_to_nchw, init_weights, save_weights};
+use hush_net::{ALIGNMENT, LossSpace, Net, Pretrained, hwc_to_nchw, init_weights, save_weights};
 use serde::{Deserialize, Serialize};
 
 use crate::checkpoint::{TrainState, load_checkpoint, save_checkpoint};
@@ -235,7 +235,7 @@ pub fn train(
             let input = Tensor::from_vec(batch.input, (n, c, s, s), device)?;
             let target = Tensor::from_vec(batch.target, (n, 3, s, s), device)?;
             let output = net.forward(&input)?;
-            let loss = cfg.loss_space.compute(cfg.loss, cfg.transfer, &output, &target)?;
+            let loss = objective(cfg, &output, &target)?;
             let value = loss.to_dtype(DType::F64)?.to_scalar::<f64>()?;
             let diverged = |cause: String, log: Vec<LossRow>| -> Result<()> {
                 let weights = save_weights(&varmap, &info)?;
@@ -353,13 +353,20 @@ fn test_loss(net: &Net, cfg: &TrainConfig, test: &[TrainSample], device: &Device
             Ok(t.narrow(2, y0, h16)?.narrow(3, x0, w16)?)
         };
         let output = net.forward(&crop(&s.input)?)?;
-        sum += cfg
-            .loss_space
-            .compute(cfg.loss, cfg.transfer, &output, &crop(&s.target)?)?
-            .to_dtype(DType::F64)?
-            .to_scalar::<f64>()?;
+        sum += objective(cfg, &output, &crop(&s.target)?)?.to_dtype(DType::F64)?.to_scalar::<f64>()?;
     }
     Ok(sum / test.len() as f64)
+}
+
+/// What a run minimizes: its loss in its loss space, plus the weighted colour-mean term on the display images.
+fn objective(cfg: &TrainConfig, output: &Tensor, target: &Tensor) -> Result<Tensor> {
+    let loss = cfg.loss_space.compute(cfg.loss, cfg.transfer, output, target)?;
+    if cfg.color_mean == 0.0 {
+        return Ok(loss);
+    }
+    let display = |t: &Tensor| LossSpace::Tonemapped.map(cfg.transfer, t);
+    let term = hush_net::loss::color_mean(&display(output)?, &display(target)?)?;
+    Ok((loss + (term * cfg.color_mean)?)?)
 }
 
 /// Channel counts, sizes and finiteness of every sample, before any work.

@@ -22,6 +22,7 @@ const TRAIN_KEYS: &[&str] = &[
     "width",
     "loss",
     "loss-space",
+    "color-mean",
     "optimizer",
     "lr",
     "schedule",

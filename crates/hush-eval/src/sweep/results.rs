@@ -23,6 +23,8 @@ pub struct EvalRow {
     pub ssim: Option<f64>,
     pub mae: Option<f64>,
     pub rel_mse: Option<f64>,
+    /// The largest relative difference of a channel's display-image mean from the reference's.
+    pub color_shift: Option<f64>,
     /// Render seconds of a noisy image or a reference.
     pub render_seconds: Option<f64>,
     /// Denoise seconds of a model.
@@ -62,7 +64,7 @@ impl EvalRow {
             mse: f64::NAN,
             rel_mse: nan(self.rel_mse),
             flip: None,
-            color_shift: None,
+            color_shift: self.color_shift,
             render_seconds: self.render_seconds,
             denoise_seconds: self.denoise_seconds,
             preview: None,

@@ -554,3 +554,29 @@ fn tonemapped_mse_is_the_metrics_mse() -> Result<()> {
     assert!((plain - expected).abs() > 1e-3 * expected, "the transfer space should differ: {plain} vs {expected}");
     Ok(())
 }
+
+/// The colour-mean term sees image means only: pixels moved around inside an image cost nothing; a channel
+/// 2 % brighter on average costs exactly its squared relative share, `(0.02·m / (m + floor))²`, divided among
+/// the channels and images it is averaged over.
+#[test]
+fn color_mean_sees_each_channels_image_mean_only() -> Result<()> {
+    use hush_net::loss::{COLOR_MEAN_FLOOR, color_mean};
+    let dev = Device::Cpu;
+    let (n, c, h, w) = (2usize, 3usize, 4usize, 5usize);
+    let y: Vec<f32> = (0..n * c * h * w).map(|i| 0.1 + 0.8 * ((i * 37 % 101) as f32 / 101.0)).collect();
+    let target = Tensor::from_vec(y.clone(), (n, c, h, w), &dev)?;
+    // Each plane reversed: every pixel changes, no mean does.
+    let reversed: Vec<f32> = y.chunks(h * w).flat_map(|p| p.iter().rev().copied().collect::<Vec<_>>()).collect();
+    let moved = Tensor::from_vec(reversed, (n, c, h, w), &dev)?;
+    assert!(scalar(&(&moved - &target)?.abs()?.mean_all()?) > 0.1, "the test image must differ per pixel");
+    assert!(scalar(&color_mean(&moved, &target)?) < 1e-12);
+    // Image 1's green plane 2 % brighter.
+    let mut brighter = y.clone();
+    let plane = (n + 1) * h * w; // image 1, channel 1
+    let before: f64 = brighter[plane..plane + h * w].iter().map(|&v| v as f64).sum::<f64>() / (h * w) as f64;
+    brighter[plane..plane + h * w].iter_mut().for_each(|v| *v *= 1.02);
+    let got = scalar(&color_mean(&Tensor::from_vec(brighter, (n, c, h, w), &dev)?, &target)?);
+    let want = (0.02 * before / (before + COLOR_MEAN_FLOOR)).powi(2) / (n * c) as f64;
+    assert!((got - want).abs() < 1e-4 * want, "got {got}, want {want}");
+    Ok(())
+}

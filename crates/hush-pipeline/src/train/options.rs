@@ -103,6 +103,11 @@ pub struct TrainOptions {
     /// reference's exposure: where hush eval measures PSNR) [default: transfer].
     #[cfg_attr(feature = "clap", arg(long))]
     pub loss_space: Option<String>,
+    /// Add this weight times the colour-mean term: per crop and channel, the relative difference between
+    /// the output's and the reference's image means on the evaluation's display images (what the colour-cast
+    /// guard measures), which per-pixel losses leave free [default: 0, none].
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub color_mean: Option<f64>,
     /// Optimizer: adam, adamw (decoupled weight decay 0.01), sgd, sgd_momentum (0.9) [default: adam].
     #[cfg_attr(feature = "clap", arg(long))]
     pub optimizer: Option<String>,
@@ -195,6 +200,7 @@ impl TrainOptions {
             width,
             loss,
             loss_space,
+            color_mean,
             optimizer,
             lr,
             schedule,
@@ -454,6 +460,7 @@ pub fn resolve_with_init(
         net,
         loss,
         loss_space,
+        color_mean: args.color_mean.unwrap_or(d.color_mean),
         optimizer,
         lr: args.lr.unwrap_or(d.lr),
         schedule,
@@ -526,6 +533,22 @@ mod tests {
         assert_ne!(wider.train.net, base.train.net);
         let unet = resolve(&args("unet", None), Some(&base), 8).unwrap();
         assert!(unet.train.net.as_unet().is_some());
+    }
+
+    /// `--color-mean W` (on the command line or in a `--config` file) reaches the run's configuration; a
+    /// resumed run keeps its weight; a negative one is refused.
+    #[test]
+    fn the_color_mean_option_reaches_the_run() {
+        let opts = |w: Option<f64>| TrainOptions { color_mean: w, dataset: Some("ds".into()), ..Default::default() };
+        let run = resolve(&opts(Some(0.5)), None, 8).unwrap();
+        assert_eq!(run.train.color_mean, 0.5);
+        assert_eq!(resolve(&opts(None), Some(&run), 8).unwrap().train.color_mean, 0.5);
+        assert_eq!(resolve(&opts(None), None, 8).unwrap().train.color_mean, 0.0);
+        let file: TrainOptions = toml::from_str("color-mean = 2.0").unwrap();
+        assert_eq!(file.color_mean, Some(2.0));
+        let err =
+            format!("{:#}", resolve(&opts(Some(-1.0)), None, 8).and_then(|r| Ok(r.train.validate()?)).unwrap_err());
+        assert!(err.contains("colour-mean"), "{err}");
     }
 
     /// `--head kernel:K` makes the U-Net predict kernels, from OIDN's weights too (whose direct output

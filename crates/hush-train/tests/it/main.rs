@@ -104,6 +104,35 @@ fn the_tonemapped_loss_space_trains_and_old_configurations_read_as_transfer() {
     assert_eq!(written["loss_space"], "tonemapped");
 }
 
+/// The colour-mean term trains in the same loop and is part of what the run minimizes (the test loss
+/// includes it, so the same weights score higher with it than without); not written when 0, so earlier
+/// runs' config.json read and write unchanged.
+#[test]
+fn the_color_mean_term_is_part_of_the_objective() {
+    let samples = synthetic(4);
+    let plain_cfg = config(20);
+    let mut cfg = config(20);
+    cfg.color_mean = 5.0;
+    let with = run(&cfg, &samples).unwrap();
+    let without = run(&plain_cfg, &samples).unwrap();
+    assert!(with.log.iter().all(|r| r.loss.is_finite()));
+    // Step 1 starts from the same weights and crops: the first loss differs by the term alone, which is > 0
+    // for an untrained network.
+    assert!(
+        with.log[0].loss > without.log[0].loss,
+        "first loss with the term {} not above without it {}",
+        with.log[0].loss,
+        without.log[0].loss
+    );
+    let plain = serde_json::to_value(&plain_cfg).unwrap();
+    assert!(plain.get("color_mean").is_none(), "the default weight is written: {plain}");
+    assert_eq!(serde_json::from_value::<TrainConfig>(plain).unwrap().color_mean, 0.0);
+    assert_eq!(serde_json::to_value(&cfg).unwrap()["color_mean"], 5.0);
+    let mut bad = config(20);
+    bad.color_mean = -1.0;
+    assert!(bad.validate().unwrap_err().to_string().contains("colour-mean"));
+}
+
 /// The patch MLP trains in the same loop, on the same crops and loss, and its weights load back as one.
 #[test]
 fn the_patch_mlp_trains_like_the_unets() {
