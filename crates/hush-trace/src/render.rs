@@ -135,6 +135,8 @@ pub struct Renderer<'a> {
     layout: wgpu::PipelineLayout,
     generic: bool,
     pipelines: Mutex<Pipelines>,
+    /// Kernels compiled so far ([`Renderer::kernels_compiled`]).
+    compiled: std::sync::atomic::AtomicUsize,
 }
 
 /// Shapes that the kernel reads from a uniform buffer (`UNIFORM_SHAPES` in shapes.wgsl): 64 KiB, the
@@ -195,7 +197,15 @@ impl<'a> Renderer<'a> {
             bind_group_layouts: &[Some(&bind_layout)],
             immediate_size: 0,
         });
-        Ok(Renderer { gpu, module, bind_layout, layout, generic: false, pipelines: Mutex::default() })
+        Ok(Renderer {
+            gpu,
+            module,
+            bind_layout,
+            layout,
+            generic: false,
+            pipelines: Mutex::default(),
+            compiled: 0.into(),
+        })
     }
 
     /// With `true`, every scene renders with the generic kernel (all features compiled in)
@@ -209,10 +219,14 @@ impl<'a> Renderer<'a> {
 
     /// The kernel specialized to `features` (pipeline-overridable constants) and, with `access`, to
     /// a scene's data, compiled once.
+    ///
+    /// The lock on the cache is not held while the driver compiles, so that [`Renderer::prepare`] on another
+    /// thread does not hold up renders of kernels already built; two threads that miss the same kernel at once
+    /// both compile it and the first to finish is kept.
     fn pipeline(&self, features: KernelFeatures, access: Option<String>) -> Result<wgpu::ComputePipeline, TraceError> {
-        let mut pipelines = self.pipelines.lock().map_err(|_| TraceError::Gpu("a render panicked".into()))?;
+        let lock = || self.pipelines.lock().map_err(|_| TraceError::Gpu("a render panicked".into()));
         let key = (features, access);
-        if let Some(p) = pipelines.map.get(&key) {
+        if let Some(p) = lock()?.map.get(&key) {
             return Ok(p.clone());
         }
         let flag = |b: bool| if b { 1.0 } else { 0.0 };
@@ -238,6 +252,7 @@ impl<'a> Renderer<'a> {
                 source: wgpu::ShaderSource::Wgsl(format!("{KERNEL_BODY}{access}").into()),
             })
         });
+        self.compiled.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some("path"),
             layout: Some(&self.layout),
@@ -252,6 +267,10 @@ impl<'a> Renderer<'a> {
                 self.gpu.info.name
             )));
         }
+        let mut pipelines = lock()?;
+        if let Some(p) = pipelines.map.get(&key) {
+            return Ok(p.clone());
+        }
         if key.1.is_some() {
             pipelines.scene_order.push_back(key.clone());
             if pipelines.scene_order.len() > MAX_CACHED_KERNELS
@@ -262,6 +281,22 @@ impl<'a> Renderer<'a> {
         }
         pipelines.map.insert(key, pipeline.clone());
         Ok(pipeline)
+    }
+
+    /// How many kernels this renderer has compiled so far (each scene's once while it stays in the cache).
+    pub fn kernels_compiled(&self) -> usize {
+        self.compiled.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    /// Builds the kernel [`Renderer::render`] needs for `scene` (the generic one, or one specialized to the
+    /// scene's data) if it is not built yet, without rendering: a caller with a list of scenes can have the
+    /// next scene's kernel compiled on another thread while the current scene renders (on lavapipe the driver
+    /// compiles on one core while the other idles). The camera and film do not enter the kernel, so every view
+    /// of the scene uses it. An error here is the one its render would report.
+    pub fn prepare(&self, scene: &Scene) -> Result<(), TraceError> {
+        let flat = flatten(scene)?;
+        let features = if self.generic { KernelFeatures::ALL } else { flat.features };
+        self.pipeline(features, scene_source(&flat, scene_literals(&flat, self.generic))).map(|_| ())
     }
 
     /// Renders `scene` with `settings.spp` paths per pixel. `progress(done, total)` is called

@@ -755,3 +755,27 @@ fn sample_variance_is_exact_on_analytic_pixels() {
         );
     }
 }
+
+/// `prepare` (on another thread, as a dataset runs it while the previous scene renders) compiles the kernel
+/// that every render of the scene then uses: other cameras and film sizes find it; another scene compiles its own.
+#[test]
+fn prepare_compiles_the_kernel_every_view_of_the_scene_uses() {
+    let renderer = Renderer::new(gpu()).unwrap();
+    let scene = cbox(8);
+    let t = std::time::Instant::now();
+    std::thread::scope(|s| s.spawn(|| renderer.prepare(&scene).unwrap()).join().unwrap());
+    let compile = t.elapsed();
+    assert_eq!(renderer.kernels_compiled(), 1);
+    let mut other_view = cbox(16);
+    other_view.camera.fov_y_deg *= 0.8;
+    let t = std::time::Instant::now();
+    for s in [&scene, &other_view] {
+        renderer.render(s, &RenderSettings { spp: 1, seed: 1 }, &mut |_, _| {}).unwrap();
+    }
+    assert_eq!(renderer.kernels_compiled(), 1, "a view of a prepared scene compiled its kernel again");
+    eprintln!("prepare: {compile:?}; then two renders of 1 spp: {:?}", t.elapsed());
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/tests/mitsuba/analytic");
+    let shapes = Scene::load(&dir.join("scene.xml")).unwrap();
+    renderer.prepare(&shapes).unwrap();
+    assert_eq!(renderer.kernels_compiled(), 2);
+}
