@@ -1143,9 +1143,78 @@ fn denoise_without_a_model_uses_the_default_for_its_inputs() {
     assert!(stderr.contains("model: oidn-2.5.1 rt_hdr "), "{stderr}");
 }
 
+/// `hush denoise` keeps the rendered value where every sample of a pixel agreed (a constant sky seen
+/// directly): with the EXR's variance layer it writes back exactly the pixels it reports, each one whose
+/// whole 3×3 neighbourhood has variance 0, and leaves every other pixel as the network made it; `--variance`
+/// from a file does the same; a render of one sample per pixel (no variance estimate) keeps nothing.
+#[test]
+fn denoise_keeps_the_pixels_whose_samples_all_agreed() {
+    let dir = scratch("keep-exact");
+    let scene = repo().join("data/tests/mitsuba/spheres-sky/scene.xml");
+    let render = dir.join("sky.exr");
+    expect_success(&["render", s(&scene), "--spp", "4", "--width", "32", "--height", "24", "--out", s(&render)]);
+    let (kept, raw) = (dir.join("kept.exr"), dir.join("raw.exr"));
+    let stderr = expect_success(&["denoise", "--color", s(&render), "--out", s(&kept)]);
+    expect_success(&["denoise", "--color", s(&render), "--keep-exact", "false", "--out", s(&raw)]);
+    let count: usize = stderr
+        .split(" pixels whose every sample agreed kept")
+        .next()
+        .and_then(|head| head.rsplit('(').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no kept count in: {stderr}"));
+    let exr = hush_dataset::read_exr(&render).unwrap();
+    let (color, variance) = (exr.layer("").unwrap(), exr.layer("variance").unwrap());
+    let (kept_img, raw_img) = (hush_dataset::read_rgb(&kept).unwrap(), hush_dataset::read_rgb(&raw).unwrap());
+    let (w, h) = (color.width, color.height);
+    let exact = |x: usize, y: usize| {
+        let p = (y * w + x) * 3;
+        variance.data[p..p + 3].iter().all(|&v| v == 0.0) && color.data[p..p + 3].iter().sum::<f32>() > 0.0
+    };
+    let mut written = 0;
+    for y in 0..h {
+        for x in 0..w {
+            let p = (y * w + x) * 3;
+            let whole = (y.saturating_sub(1)..=(y + 1).min(h - 1))
+                .all(|r| (x.saturating_sub(1)..=(x + 1).min(w - 1)).all(|c| exact(c, r)));
+            let want = if whole { &color.data[p..p + 3] } else { &raw_img.data[p..p + 3] };
+            assert_eq!(&kept_img.data[p..p + 3], want, "pixel ({x}, {y}), exact neighbourhood {whole}");
+            written += usize::from(whole);
+        }
+    }
+    assert!(count > 50 && count == written, "reported {count}, exact neighbourhoods {written}: the sky is kept");
+    // The variance from a file, with the plain color: the same image.
+    let (plain, var_file, again) = (dir.join("color.exr"), dir.join("variance.exr"), dir.join("again.exr"));
+    hush_dataset::write_rgb(&plain, &color).unwrap();
+    hush_dataset::write_rgb(&var_file, &variance).unwrap();
+    let albedo_normal = [dir.join("albedo.exr"), dir.join("normal.exr")];
+    for (layer, path) in ["albedo", "normal"].iter().zip(&albedo_normal) {
+        hush_dataset::write_rgb(path, &exr.layer(layer).unwrap()).unwrap();
+    }
+    let [a, n] = [&albedo_normal[0], &albedo_normal[1]].map(|p| s(p));
+    expect_success(&[
+        "denoise",
+        "--color",
+        s(&plain),
+        "--albedo",
+        a,
+        "--normal",
+        n,
+        "--variance",
+        s(&var_file),
+        "--out",
+        s(&again),
+    ]);
+    assert!(hush_dataset::read_rgb(&again).unwrap() == kept_img, "--variance from a file differs from the layer");
+    // One sample per pixel: no variance estimate, nothing kept.
+    expect_success(&["render", s(&scene), "--spp", "1", "--width", "32", "--height", "24", "--out", s(&render)]);
+    let stderr = expect_success(&["denoise", "--color", s(&render), "--out", s(&kept)]);
+    assert!(stderr.contains("(0 pixels whose every sample agreed kept"), "{stderr}");
+}
+
 /// `hush denoise` reads and writes PFM, OIDN's format: the color, albedo and normal of a `hush render` EXR
 /// written as PFM files denoise to the image the EXR itself denoises to, bit for bit (the same pixels and
-/// model), and the output is a PFM where its name says so.
+/// model; the EXR's variance layer, which the PFM files lack, is left unused with `--keep-exact false`), and
+/// the output is a PFM where its name says so.
 #[test]
 fn denoise_reads_and_writes_pfm() {
     let dir = scratch("pfm");
@@ -1157,7 +1226,7 @@ fn denoise_reads_and_writes_pfm() {
         hush_dataset::write_pfm(path, &exr.layer(layer).unwrap()).unwrap();
     }
     let (from_exr, from_pfm) = (dir.join("from-exr.exr"), dir.join("from-pfm.pfm"));
-    expect_success(&["denoise", "--color", s(&render), "--out", s(&from_exr)]);
+    expect_success(&["denoise", "--color", s(&render), "--keep-exact", "false", "--out", s(&from_exr)]);
     let [c, a, n] = [&paths[0], &paths[1], &paths[2]].map(|p| s(p));
     let stderr = expect_success(&["denoise", "--color", c, "--albedo", a, "--normal", n, "--out", s(&from_pfm)]);
     assert!(stderr.contains("model: hush_alb_nrm (shipped)"), "{stderr}");

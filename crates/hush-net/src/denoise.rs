@@ -40,3 +40,57 @@ pub fn denoise(
     finish_color_in_place(&mut y, exposure, info.transfer);
     Ok(y)
 }
+
+/// Where a render's every sample agreed, its pixel is already exact: a camera ray that saw a constant sky or
+/// an emitter directly returns the same radiance on every sample, so the pixel's sample variance is exactly 0
+/// (the tracer's merged sums cancel exactly for equal samples). A network reproduces such pixels only
+/// approximately (it smooths a constant sky by a few thousandths, which FLIP sees over the whole sky); this
+/// writes the noisy value back into `out` for every pixel that, with each of its 8 neighbours inside the image,
+/// has variance 0 in every channel and a positive, finite color. Neighbours too, so that a pixel on an emitter's
+/// edge whose few samples all happened to land inside it is left to the network; black pixels too, since paths
+/// that all found no light say nothing about what more paths would find.
+///
+/// `color`, `variance` (per channel, of the pixel's mean: `hush render`'s `variance` layer) and `out` are
+/// interleaved RGB, `width × height × 3` values. One sample per pixel has no variance estimate (the tracer
+/// writes 0): where no pixel has a variance above 0, nothing is kept. Returns how many pixels were kept.
+pub fn keep_exact_pixels(
+    out: &mut [f32],
+    color: &[f32],
+    variance: &[f32],
+    width: usize,
+    height: usize,
+) -> Result<usize> {
+    let n = width * height * 3;
+    if out.len() != n || color.len() != n || variance.len() != n {
+        candle_core::bail!(
+            "keep_exact_pixels: a {width}x{height} RGB image has {n} values; got output {}, color {}, variance {}",
+            out.len(),
+            color.len(),
+            variance.len()
+        )
+    }
+    if variance.iter().all(|&v| v == 0.0) {
+        return Ok(0);
+    }
+    let exact: Vec<bool> = color
+        .chunks_exact(3)
+        .zip(variance.chunks_exact(3))
+        .map(|(c, v)| {
+            v.iter().all(|&v| v == 0.0) && c.iter().all(|&c| c.is_finite() && c >= 0.0) && c.iter().sum::<f32>() > 0.0
+        })
+        .collect();
+    let mut kept = 0;
+    for y in 0..height {
+        for x in 0..width {
+            let rows = y.saturating_sub(1)..=(y + 1).min(height - 1);
+            let all =
+                rows.into_iter().all(|r| (x.saturating_sub(1)..=(x + 1).min(width - 1)).all(|c| exact[r * width + c]));
+            if all {
+                let p = (y * width + x) * 3;
+                out[p..p + 3].copy_from_slice(&color[p..p + 3]);
+                kept += 1;
+            }
+        }
+    }
+    Ok(kept)
+}

@@ -178,6 +178,12 @@ pub struct DenoiseArgs {
     /// Where the network runs: cpu or cuda [default: cuda when hush is built with it, else cpu].
     #[arg(long)]
     pub device: Option<String>,
+    /// Keep the input's value where every sample of the pixel agreed (variance 0 and a positive color over the
+    /// pixel and its 8 neighbours: a constant sky or an emitter seen directly), with the color's variance from
+    /// --variance or the `variance` layer of a `hush render` EXR; false: the network's output as OIDN's
+    /// runtime gives it.
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub keep_exact: bool,
 }
 
 #[derive(Args, Debug)]
@@ -216,6 +222,12 @@ pub struct EvalArgs {
     /// Where the networks run: cpu or cuda [default: cuda when hush is built with it, else cpu].
     #[arg(long)]
     pub device: Option<String>,
+    /// After each network (hush's models and OIDN's official weights alike), keep the noisy value of the
+    /// pixels whose every sample agreed (variance 0 and a positive color over the pixel and its 8 neighbours:
+    /// a constant sky or an emitter seen directly), where the dataset stores the render's variance; false:
+    /// the networks' output as OIDN's runtime gives it.
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub keep_exact: bool,
 }
 
 impl EvalArgs {
@@ -231,6 +243,7 @@ impl EvalArgs {
             official: !self.no_official,
             scenes: self.scenes,
             device: self.device,
+            keep_exact: self.keep_exact,
         }
     }
 }

@@ -66,7 +66,9 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
             (model.denoiser_on(&device)?, model.name())
         }
     };
-    for f in Feature::ALL.into_iter().filter(|f| given(*f).is_some() && !model.features().contains(f)) {
+    // The variance also serves --keep-exact, whatever the model takes.
+    let unused = |f: &Feature| !(model.features().contains(f) || (*f == Feature::Variance && args.keep_exact));
+    for f in Feature::ALL.into_iter().filter(|f| given(*f).is_some() && unused(f)) {
         eprintln!("warning: --{} is ignored: model {} takes {}", f.long_name(), model_name, model.info.features);
     }
     let mut aux: Vec<Image> = Vec::new();
@@ -94,15 +96,34 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
             eprintln!("warning: the {name} input holds {bad} NaN/Inf values; they are treated as 0");
         }
     }
+    // The variance for keeping exact pixels: the model's own input where it takes one, else --variance or
+    // the EXR's layer.
+    let variance = match model.features().iter().position(|&f| f == Feature::Variance) {
+        _ if !args.keep_exact => None,
+        Some(i) => Some(aux[i].clone()),
+        None => match (&args.variance, layer(Feature::Variance)) {
+            (Some(path), _) => Some(read_image(path)?),
+            (None, Some(image)) => Some(image?),
+            (None, None) => None,
+        },
+    };
     let refs: Vec<&Image> = aux.iter().collect();
     let start = std::time::Instant::now();
-    let out = model.denoise(&color, &refs)?;
+    let mut out = model.denoise(&color, &refs)?;
+    let kept = match &variance {
+        Some(v) => Some(hush_pipeline::keep_exact(&mut out, &color, v)?),
+        None => None,
+    };
     eprintln!(
-        "denoised {}×{} in {:.3} s → {}",
+        "denoised {}×{} in {:.3} s → {}{}",
         color.width,
         color.height,
         start.elapsed().as_secs_f64(),
-        args.out.display()
+        args.out.display(),
+        match kept {
+            Some(k) => format!(" ({k} pixels whose every sample agreed kept as rendered)"),
+            None => String::new(),
+        }
     );
     if is_pfm(&args.out) {
         write_pfm(&args.out, &out)?

@@ -89,3 +89,60 @@ fn finish_color_inverts_prepare_color() {
     // Negative network output is clamped to 0.
     assert_eq!(finish_color(&[-0.5], 1.0, Transfer::Pu), vec![0.0]);
 }
+
+/// Exact pixels (variance 0, a positive color) are written back where their whole 3×3 neighbourhood inside the
+/// image is exact: the interior of an exact region and its image-border pixels, not its edge against noise;
+/// black pixels never; nothing at all where no pixel has a variance (one sample per pixel).
+#[test]
+fn keep_exact_pixels_writes_back_the_interior_of_exact_regions() {
+    use hush_net::keep_exact_pixels;
+    let (w, h) = (6usize, 5usize);
+    // Exact where x < 4 and y < 4 (a constant sky in the top left, touching the image's top and left border);
+    // (0, 0) black with variance 0; noisy elsewhere.
+    let exact = |x: usize, y: usize| x < 4 && y < 4;
+    let mut color = vec![0.0f32; w * h * 3];
+    let mut variance = vec![0.0f32; w * h * 3];
+    for y in 0..h {
+        for x in 0..w {
+            let p = (y * w + x) * 3;
+            let black = (x, y) == (0, 0);
+            color[p..p + 3].copy_from_slice(if black { &[0.0; 3] } else { &[0.5, 0.6, 0.7] });
+            if !exact(x, y) {
+                variance[p..p + 3].copy_from_slice(&[1e-3; 3]);
+            }
+        }
+    }
+    let mut out = vec![9.0f32; w * h * 3];
+    let kept = keep_exact_pixels(&mut out, &color, &variance, w, h).unwrap();
+    // Kept: every pixel whose neighbourhood (clipped to the image) lies in x < 4, y < 4 and avoids the black
+    // (0, 0): (2, 0), (2, 1), (0, 2), (1, 2), (2, 2); x = 3 touches x = 4, y = 3 touches y = 4.
+    let want: Vec<(usize, usize)> = (0..h)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .filter(|&(x, y)| {
+            let near = |dx: i64, dy: i64| {
+                let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                nx < 0
+                    || ny < 0
+                    || nx >= w as i64
+                    || ny >= h as i64
+                    || (exact(nx as usize, ny as usize) && (nx, ny) != (0, 0))
+            };
+            (-1..=1).all(|dy| (-1..=1).all(|dx| near(dx, dy)))
+        })
+        .collect();
+    assert_eq!(want, vec![(2, 0), (2, 1), (0, 2), (1, 2), (2, 2)], "the test's own expectation");
+    assert_eq!(kept, want.len());
+    for y in 0..h {
+        for x in 0..w {
+            let p = (y * w + x) * 3;
+            let expected: &[f32] = if want.contains(&(x, y)) { &color[p..p + 3] } else { &[9.0; 3] };
+            assert_eq!(&out[p..p + 3], expected, "pixel ({x}, {y})");
+        }
+    }
+    // One sample per pixel: no variance anywhere, nothing kept.
+    let mut untouched = vec![9.0f32; w * h * 3];
+    assert_eq!(keep_exact_pixels(&mut untouched, &color, &vec![0.0; w * h * 3], w, h).unwrap(), 0);
+    assert!(untouched.iter().all(|&v| v == 9.0));
+    let err = keep_exact_pixels(&mut out, &color, &variance[3..], w, h).unwrap_err().to_string();
+    assert!(err.contains("6x5"), "{err}");
+}

@@ -22,6 +22,25 @@ pub fn aux_of(view: &hush_dataset::ViewImages, f: Feature) -> Result<&Image> {
     })
 }
 
+/// Writes the pixels of `color` whose every sample agreed into the denoised `out` ([`hush_net::keep_exact_pixels`]:
+/// variance 0 and a positive color over the pixel's 3×3 neighbourhood); returns how many. `variance` is the
+/// render's per-pixel variance of its mean (`hush render`'s `variance` layer).
+pub fn keep_exact(out: &mut Image, color: &Image, variance: &Image) -> Result<usize> {
+    for (what, image) in [("color", color), ("variance", variance)] {
+        if (image.width, image.height, image.channels) != (out.width, out.height, 3) {
+            bail!(
+                "keeping exact pixels: the {what} image is {}×{}×{} but the denoised image is {}×{}×3",
+                image.width,
+                image.height,
+                image.channels,
+                out.width,
+                out.height
+            );
+        }
+    }
+    Ok(hush_net::keep_exact_pixels(&mut out.data, &color.data, &variance.data, out.width, out.height)?)
+}
+
 /// A trained model (a hush model or OIDN weights) and what it expects.
 #[derive(Debug)]
 pub struct Denoiser {

@@ -8,7 +8,7 @@ use hush_dataset::{Image, ViewImages};
 use hush_eval::guided::{GuidedParams, guided_filter};
 use hush_eval::{NOISY, Skipped, external, time_median};
 
-use super::denoiser::{Denoiser, aux_of};
+use super::denoiser::{Denoiser, aux_of, keep_exact};
 
 /// What produced one test image, and how.
 pub trait Method {
@@ -109,6 +109,9 @@ impl Method for Noisy {
 pub struct Model {
     pub name: String,
     pub denoiser: Denoiser,
+    /// Write back the pixels whose every sample agreed ([`super::denoiser::keep_exact`]) where the view has
+    /// the render's variance.
+    pub keep_exact: bool,
 }
 
 impl Method for Model {
@@ -122,7 +125,14 @@ impl Method for Model {
 
     fn run(&self, images: &ViewImages, timing_runs: usize) -> Result<Run> {
         let aux = self.denoiser.features().iter().map(|&f| aux_of(images, f)).collect::<Result<Vec<&Image>>>()?;
-        let (image, seconds) = timed(timing_runs, || self.denoiser.denoise(&images.color, &aux))?;
+        let variance = images.variance.as_ref().filter(|_| self.keep_exact);
+        let (image, seconds) = timed(timing_runs, || {
+            let mut out = self.denoiser.denoise(&images.color, &aux)?;
+            if let Some(variance) = variance {
+                keep_exact(&mut out, &images.color, variance)?;
+            }
+            Ok(out)
+        })?;
         Ok(Run::Done(image, Some(seconds)))
     }
 }

@@ -15,7 +15,7 @@ use hush_dataset::{AuxSource, Image, Manifest, Split, load_view_with, write_png_
 use hush_eval::viewer::file_safe;
 use hush_eval::{REFERENCE, Report, Row, Viewer, compare, exposure_of};
 
-pub use denoiser::{Denoiser, aux_of};
+pub use denoiser::{Denoiser, aux_of, keep_exact};
 pub use methods::{BASELINES, Method, Model, Run, baseline, method_name};
 
 use crate::Observer;
@@ -50,6 +50,9 @@ pub struct EvalPlan {
     pub scenes: Vec<String>,
     /// Where the networks run: `cpu` or `cuda` ([`crate::device`]; `None`: CUDA when built with it).
     pub device: Option<String>,
+    /// After every network (hush's models and OIDN's official weights alike), write back the pixels whose
+    /// every sample agreed ([`hush_net::keep_exact_pixels`]), where the dataset stores the render's variance.
+    pub keep_exact: bool,
 }
 
 impl EvalPlan {
@@ -68,6 +71,7 @@ impl EvalPlan {
             official: true,
             scenes: Vec::new(),
             device: None,
+            keep_exact: true,
         }
     }
 }
@@ -109,7 +113,7 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
         if !sets.contains(&info.features) {
             sets.push(info.features.clone());
         }
-        methods.push(Box::new(Model { name, denoiser }));
+        methods.push(Box::new(Model { name, denoiser, keep_exact: plan.keep_exact }));
     }
     if plan.official {
         if sets.is_empty() {
@@ -131,6 +135,7 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
             methods.push(Box::new(Model {
                 name: weights.method_name(),
                 denoiser: Denoiser::official_on(&weights, &device)?,
+                keep_exact: plan.keep_exact,
             }));
         }
     }
@@ -178,7 +183,16 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
     ));
     report.notes.push("PNG previews of every image are in previews/ beside report.md.".into());
 
-    let variance = methods.iter().any(|m| m.needs_variance());
+    let variance = plan.keep_exact || methods.iter().any(|m| m.needs_variance());
+    if plan.keep_exact {
+        report.notes.push(
+            "After each network (hush's models and OIDN's official weights alike), pixels whose every sample \
+             agreed are the noisy input's (`--keep-exact`, on by default): a pixel with variance 0 in every channel \
+             and a positive color, whose 8 neighbours are such pixels too (a constant sky or an emitter seen \
+             directly), where the dataset stores the render's variance and some pixel has a variance above 0."
+                .into(),
+        );
+    }
     for view in &views {
         let name = format!("{}_{}", view.scene, view.view);
         let spps: Vec<u32> =
