@@ -1211,6 +1211,37 @@ fn denoise_keeps_the_pixels_whose_samples_all_agreed() {
     assert!(stderr.contains("(0 pixels whose every sample agreed kept"), "{stderr}");
 }
 
+/// Keeping exact pixels uses the variance only where it can: a render's variance file that cannot be read
+/// makes `hush eval` note it and evaluate the view without the step (a model that takes the variance still
+/// fails on it), and an unusable `--variance` makes `hush denoise` warn and denoise without it.
+#[test]
+fn an_unreadable_variance_only_skips_keeping_exact_pixels() {
+    let dir = scratch("bad-variance");
+    let ds = small_dataset(&dir);
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(ds.join("manifest.json")).unwrap()).unwrap();
+    let test = manifest["views"].as_array().unwrap().iter().find(|v| v["split"] == "test").unwrap();
+    let noisy = test["noisy"].as_array().unwrap().iter().find(|r| r["spp"] == 4).unwrap();
+    let variance = ds.join(noisy["variance"].as_str().expect("the dataset stores the render's variance"));
+    std::fs::write(&variance, b"not an EXR").unwrap();
+    let report = dir.join("eval");
+    let stderr =
+        expect_success(&["eval", "--dataset", s(&ds), "--spp", "4", "--timing-runs", "1", "--out", s(&report)]);
+    assert!(stderr.contains("could not be read"), "{stderr}");
+    let md = std::fs::read_to_string(report.join("report.md")).unwrap();
+    assert!(md.contains("No exact pixels were kept where the render's variance file could not be read"), "{md}");
+    // hush denoise with that file as --variance: a warning, and the network's output.
+    let color = ds.join(noisy["file"].as_str().unwrap());
+    let aux = |kind: &str| ds.join(noisy["aux"][kind].as_str().unwrap());
+    let (out, plain) = (dir.join("out.exr"), dir.join("plain.exr"));
+    let (albedo, normal) = (aux("albedo"), aux("normal"));
+    let base = ["denoise", "--color", s(&color), "--albedo", s(&albedo), "--normal", s(&normal)];
+    let stderr = expect_success(&[&base[..], &["--variance", s(&variance), "--out", s(&out)]].concat());
+    assert!(stderr.contains("warning: no exact pixels kept: the variance is unusable"), "{stderr}");
+    expect_success(&[&base[..], &["--keep-exact", "false", "--out", s(&plain)]].concat());
+    assert!(hush_dataset::read_rgb(&out).unwrap() == hush_dataset::read_rgb(&plain).unwrap());
+}
+
 /// `hush denoise` reads and writes PFM, OIDN's format: the color, albedo and normal of a `hush render` EXR
 /// written as PFM files denoise to the image the EXR itself denoises to, bit for bit (the same pixels and
 /// model; the EXR's variance layer, which the PFM files lack, is left unused with `--keep-exact false`), and

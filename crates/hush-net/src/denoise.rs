@@ -69,7 +69,7 @@ pub fn keep_exact_pixels(
             variance.len()
         )
     }
-    if variance.iter().all(|&v| v == 0.0) {
+    if !variance.iter().any(|&v| v > 0.0) {
         return Ok(0);
     }
     let exact: Vec<bool> = color

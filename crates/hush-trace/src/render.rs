@@ -283,7 +283,8 @@ impl<'a> Renderer<'a> {
         Ok(pipeline)
     }
 
-    /// How many kernels this renderer has compiled so far (each scene's once while it stays in the cache).
+    /// How many kernel compilations this renderer has started so far: each scene's once while it stays in the
+    /// cache (two threads that miss the same kernel at once both count, as does a compilation that failed).
     pub fn kernels_compiled(&self) -> usize {
         self.compiled.load(std::sync::atomic::Ordering::Relaxed)
     }
@@ -291,8 +292,9 @@ impl<'a> Renderer<'a> {
     /// Builds the kernel [`Renderer::render`] needs for `scene` (the generic one, or one specialized to the
     /// scene's data) if it is not built yet, without rendering: a caller with a list of scenes can have the
     /// next scene's kernel compiled on another thread while the current scene renders (on lavapipe the driver
-    /// compiles on one core while the other idles). The camera and film do not enter the kernel, so every view
-    /// of the scene uses it. An error here is the one its render would report.
+    /// compiles on one core while the other idles). The camera and the film's size do not enter the kernel
+    /// (its pixel filter does), so every view of the scene uses it. An error here is the one its render would
+    /// report.
     pub fn prepare(&self, scene: &Scene) -> Result<(), TraceError> {
         let flat = flatten(scene)?;
         let features = if self.generic { KernelFeatures::ALL } else { flat.features };

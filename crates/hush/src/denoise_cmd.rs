@@ -98,14 +98,41 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
     }
     // The variance for keeping exact pixels: the model's own input where it takes one, else --variance or
     // the EXR's layer.
+    // A variance that only serves that step and cannot be used is a warning, not an error.
     let variance = match model.features().iter().position(|&f| f == Feature::Variance) {
         _ if !args.keep_exact => None,
         Some(i) => Some(aux[i].clone()),
-        None => match (&args.variance, layer(Feature::Variance)) {
-            (Some(path), _) => Some(read_image(path)?),
-            (None, Some(image)) => Some(image?),
-            (None, None) => None,
-        },
+        None => {
+            let read = match (&args.variance, layer(Feature::Variance)) {
+                (Some(path), _) => Some(read_image(path).with_context(|| format!("reading {}", path.display()))),
+                (None, Some(image)) => {
+                    Some(image.with_context(|| format!("the variance layer of {}", args.color.display())))
+                }
+                (None, None) => None,
+            };
+            let usable = read.map(|r| {
+                r.and_then(|v| {
+                    if (v.width, v.height, v.channels) != (color.width, color.height, 3) {
+                        bail!(
+                            "it is {}×{}×{}, the color {}×{}×3",
+                            v.width,
+                            v.height,
+                            v.channels,
+                            color.width,
+                            color.height
+                        )
+                    }
+                    Ok(v)
+                })
+            });
+            match usable {
+                Some(Err(e)) => {
+                    eprintln!("warning: no exact pixels kept: the variance is unusable: {e:#}");
+                    None
+                }
+                other => other.transpose()?,
+            }
+        }
     };
     let refs: Vec<&Image> = aux.iter().collect();
     let start = std::time::Instant::now();

@@ -572,7 +572,7 @@ fn color_mean_sees_each_channels_image_mean_only() -> Result<()> {
     assert!(scalar(&color_mean(&moved, &target)?) < 1e-12);
     // Image 1's green plane 2 % brighter.
     let mut brighter = y.clone();
-    let plane = (n + 1) * h * w; // image 1, channel 1
+    let plane = (c + 1) * h * w; // image 1, channel 1
     let before: f64 = brighter[plane..plane + h * w].iter().map(|&v| v as f64).sum::<f64>() / (h * w) as f64;
     brighter[plane..plane + h * w].iter_mut().for_each(|v| *v *= 1.02);
     let got = scalar(&color_mean(&Tensor::from_vec(brighter, (n, c, h, w), &dev)?, &target)?);

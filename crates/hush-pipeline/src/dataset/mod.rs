@@ -250,7 +250,7 @@ pub fn build(plan: &DatasetPlan, renderer: &Renderer, observer: &dyn Observer) -
         // scene this manifest has no view of yet: one with recorded views may need no render at all. An error
         // there is left to the scene's own render to report.
         let mut compiling: Option<(usize, std::thread::ScopedJoinHandle<'_, ()>)> = None;
-        jobs.iter().enumerate().try_for_each(|(k, &(s, v))| {
+        let result = jobs.iter().enumerate().try_for_each(|(k, &(s, v))| {
             if let Some((_, handle)) = compiling.take_if(|(next, _)| *next == s) {
                 let _ = handle.join();
             }
@@ -268,7 +268,13 @@ pub fn build(plan: &DatasetPlan, renderer: &Renderer, observer: &dyn Observer) -
             let split = job.split.unwrap_or(if v >= plan.views - plan.test_views { Split::Test } else { Split::Train });
             views::render_view(&mut ctx, &known, job, v, split)
                 .with_context(|| format!("{} v{v:03} (scene {})", job.name, job.path.display()))
-        })
+        });
+        // A compile still running after a failed view is waited for here, its outcome (even a panic) set
+        // aside, so that the view's own error is what the run reports.
+        if let Some((_, handle)) = compiling.take() {
+            let _ = handle.join();
+        }
+        result
     });
     observer.task_done();
     result?;

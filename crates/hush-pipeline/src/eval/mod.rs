@@ -50,8 +50,9 @@ pub struct EvalPlan {
     pub scenes: Vec<String>,
     /// Where the networks run: `cpu` or `cuda` ([`crate::device`]; `None`: CUDA when built with it).
     pub device: Option<String>,
-    /// After every network (hush's models and OIDN's official weights alike), write back the pixels whose
-    /// every sample agreed ([`hush_net::keep_exact_pixels`]), where the dataset stores the render's variance.
+    /// After every network hush runs (its models and OIDN's official weights alike; not the `oidn` baseline,
+    /// OIDN's own runtime), write back the pixels whose every sample agreed ([`hush_net::keep_exact_pixels`]),
+    /// where the dataset stores the render's variance (a variance file that cannot be read is noted and skipped).
     pub keep_exact: bool,
 }
 
@@ -183,10 +184,13 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
     ));
     report.notes.push("PNG previews of every image are in previews/ beside report.md.".into());
 
-    let variance = plan.keep_exact || methods.iter().any(|m| m.needs_variance());
+    // A model that takes the variance needs it; keeping exact pixels only uses it where it reads.
+    let variance_needed = methods.iter().any(|m| m.needs_variance());
+    let mut unreadable_variance = Vec::new();
     if plan.keep_exact {
         report.notes.push(
-            "After each network (hush's models and OIDN's official weights alike), pixels whose every sample \
+            "After each network hush runs (its models and OIDN's official weights alike; the `oidn` baseline is OIDN's \
+             own runtime, left as it is), pixels whose every sample \
              agreed are the noisy input's (`--keep-exact`, on by default): a pixel with variance 0 in every channel \
              and a positive color, whose 8 neighbours are such pixels too (a constant sky or an emitter seen \
              directly), where the dataset stores the render's variance and some pixel has a variance above 0."
@@ -202,7 +206,13 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
         };
         let mut reference_row = true;
         for spp in spps {
-            let images = load_view_with(&plan.dataset, view, spp, plan.aux, variance)?;
+            let images = match load_view_with(&plan.dataset, view, spp, plan.aux, variance_needed || plan.keep_exact) {
+                Err(e) if plan.keep_exact && !variance_needed => {
+                    unreadable_variance.push(format!("{name} at {spp} spp ({e})"));
+                    load_view_with(&plan.dataset, view, spp, plan.aux, false)?
+                }
+                loaded => loaded?,
+            };
             let exposure = exposure_of(&images.reference)?;
             let preview = |method: &str, image: &Image| -> Result<String> {
                 let file = format!("{name}_{spp:06}_{}.png", file_safe(method));
@@ -247,6 +257,15 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
                 report.viewers.push(Viewer::write(&plan.out, &name, spp, &outputs, &images.reference, exposure)?);
             }
         }
+    }
+    if !unreadable_variance.is_empty() {
+        let note = format!(
+            "No exact pixels were kept where the render's variance file could not be read: {}. `hush dataset check` \
+             names such files; `hush dataset` with the same arguments renders them again.",
+            unreadable_variance.join("; ")
+        );
+        observer.note(&note);
+        report.notes.push(note);
     }
     report.write(&plan.out)?;
     Ok(report)

@@ -103,8 +103,8 @@ pub struct TrainOptions {
     /// reference's exposure: where hush eval measures PSNR) [default: transfer].
     #[cfg_attr(feature = "clap", arg(long))]
     pub loss_space: Option<String>,
-    /// Add this weight times the colour-mean term: per crop and channel, the relative difference between
-    /// the output's and the reference's image means on the evaluation's display images (what the colour-cast
+    /// Add this weight times the colour-mean term: per crop and channel, the squared relative difference
+    /// between the output's and the reference's image means on the evaluation's display images (what the colour-cast
     /// guard measures), which per-pixel losses leave free [default: 0, none].
     #[cfg_attr(feature = "clap", arg(long))]
     pub color_mean: Option<f64>,

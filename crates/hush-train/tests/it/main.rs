@@ -104,9 +104,9 @@ fn the_tonemapped_loss_space_trains_and_old_configurations_read_as_transfer() {
     assert_eq!(written["loss_space"], "tonemapped");
 }
 
-/// The colour-mean term trains in the same loop and is part of what the run minimizes (the test loss
-/// includes it, so the same weights score higher with it than without); not written when 0, so earlier
-/// runs' config.json read and write unchanged.
+/// The colour-mean term trains in the same loop and is part of what the run minimizes (a step's loss includes
+/// it, so the same weights and crops score higher with it than without); not written when 0, so earlier runs'
+/// config.json read and write unchanged.
 #[test]
 fn the_color_mean_term_is_part_of_the_objective() {
     let samples = synthetic(4);
