@@ -23,6 +23,13 @@ fn wrap(f: f32, n: u32) -> u32 {
     return min(u32(r), n - 1u);
 }
 
+// A material texture's texel: three halves in two words (upload.rs, `push_texture`), four words
+// fewer per bilinear lookup than three floats, each of which CPU drivers load lane by lane.
+fn texture_texel(base: u32, width: u32, x: u32, y: u32) -> vec3<f32> {
+    let i = base + 2u + 2u * (y * width + x);
+    return vec3<f32>(unpack2x16float(aux_u32(i)), unpack2x16float(aux_u32(i + 1u)).x);
+}
+
 // Mitsuba's `bitmap` lookup: bilinear between texel centres, repeating outside [0, 1]²;
 // (0, 0) is the top-left corner of the image.
 fn texture_lookup(base: u32, uv: vec2<f32>) -> vec3<f32> {
@@ -35,8 +42,8 @@ fn texture_lookup(base: u32, uv: vec2<f32>) -> vec3<f32> {
     let y0 = wrap(f.y, h);
     let x1 = select(x0 + 1u, 0u, x0 + 1u == w);
     let y1 = select(y0 + 1u, 0u, y0 + 1u == h);
-    let top = mix(image_texel(base, w, x0, y0), image_texel(base, w, x1, y0), t.x);
-    let bottom = mix(image_texel(base, w, x0, y1), image_texel(base, w, x1, y1), t.x);
+    let top = mix(texture_texel(base, w, x0, y0), texture_texel(base, w, x1, y0), t.x);
+    let bottom = mix(texture_texel(base, w, x0, y1), texture_texel(base, w, x1, y1), t.x);
     return mix(top, bottom, t.y);
 }
 

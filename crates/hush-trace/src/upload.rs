@@ -99,7 +99,8 @@ pub(crate) const NO_TEXTURE: u32 = u32::MAX;
 /// map) and tables, each at an offset that the records using it store as bits.
 ///
 /// An image is a header (width and height, as bits) followed by its linear RGB texels, rows
-/// top to bottom.
+/// top to bottom: three floats each for an environment map ([`Aux::push_image`]), three halves in two
+/// words each for a material's texture ([`Aux::push_texture`]).
 #[derive(Default)]
 pub(crate) struct Aux {
     pub data: Vec<f32>,
@@ -117,6 +118,25 @@ impl Aux {
         offset
     }
 
+    /// Appends a material's texture with its texels as halves (`pack2x16float(r, g)`,
+    /// `pack2x16float(b, 0)`: two words a texel instead of three, which CPU drivers load lane by lane);
+    /// returns its offset. Values are clamped to [0, 65504], the halves' finite range (a reflectance
+    /// is at most 1); a half keeps 11 significant bits, finer than an 8-bit image's steps.
+    pub fn push_texture(&mut self, width: u32, height: u32, texels: &[f32]) -> u32 {
+        let offset = self.offset();
+        self.data.push(f32::from_bits(width));
+        self.data.push(f32::from_bits(height));
+        let half = |v: f32| {
+            let v = if v.is_nan() { 0.0 } else { v.clamp(0.0, 65504.0) };
+            u32::from(half::f16::from_f32(v).to_bits())
+        };
+        for t in texels.chunks_exact(3) {
+            self.data.push(f32::from_bits(half(t[0]) | (half(t[1]) << 16)));
+            self.data.push(f32::from_bits(half(t[2])));
+        }
+        offset
+    }
+
     /// The offset of a scene texture, uploaded on first use.
     fn texture(&mut self, id: TextureId, textures: &[Texture]) -> Result<(u32, Vec3), TraceError> {
         let t = textures.get(id.0 as usize).ok_or_else(|| {
@@ -125,7 +145,7 @@ impl Aux {
         if let Some(&offset) = self.textures.get(&id.0) {
             return Ok((offset, t.mean()));
         }
-        let offset = self.push_image(t.width, t.height, &t.data);
+        let offset = self.push_texture(t.width, t.height, &t.data);
         self.textures.insert(id.0, offset);
         Ok((offset, t.mean()))
     }
@@ -671,6 +691,31 @@ pub(crate) fn flatten(scene: &Scene) -> Result<GpuScene, TraceError> {
 #[cfg(test)]
 mod tests {
     use super::push_alias;
+
+    /// A texture's texels as the kernel's `texture_texel` reads them: a header, then per texel
+    /// `pack2x16float(r, g)` and `pack2x16float(b, 0)`; values rounded to the nearest half, clamped to
+    /// [0, 65504], NaN as 0.
+    #[test]
+    fn textures_are_stored_as_halves_two_words_a_texel() {
+        let mut aux = super::Aux::default();
+        aux.data.push(7.0); // something before it: the offset is where the texture starts
+        let offset = aux.push_texture(2, 1, &[0.5, 0.1, 1.0, 7e4, f32::NAN, -1.0]) as usize;
+        assert_eq!(offset, 1);
+        assert_eq!((aux.data[1].to_bits(), aux.data[2].to_bits()), (2, 1));
+        assert_eq!(aux.data.len(), 1 + 2 + 2 * 2);
+        let halves = |w: f32| {
+            let b = w.to_bits();
+            [half::f16::from_bits(b as u16).to_f32(), half::f16::from_bits((b >> 16) as u16).to_f32()]
+        };
+        let texel = |i: usize| {
+            let (rg, b) = (halves(aux.data[3 + 2 * i]), halves(aux.data[4 + 2 * i]));
+            assert_eq!(b[1], 0.0, "the fourth half is zero");
+            [rg[0], rg[1], b[0]]
+        };
+        assert_eq!(texel(0), [0.5, half::f16::from_f32(0.1).to_f32(), 1.0]);
+        assert!((texel(0)[1] - 0.1).abs() < 0.1 / 2048.0, "a half keeps 11 significant bits");
+        assert_eq!(texel(1), [65504.0, 0.0, 0.0]);
+    }
 
     /// Drawing a cell uniformly, keeping it with its threshold and otherwise taking its alias picks
     /// each cell with exactly its stored probability (up to `f32` rounding), for skewed, sparse and
