@@ -97,8 +97,14 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
         }
     }
     // The variance for keeping exact pixels: the model's own input where it takes one, else --variance or
-    // the EXR's layer.
-    // A variance that only serves that step and cannot be used is a warning, not an error.
+    // the EXR's layer, where a variance that cannot be used is a warning (it serves only that step).
+    let matches_color = |v: Image| -> Result<Image> {
+        let (w, h, c) = (v.width, v.height, v.channels);
+        if (w, h, c) != (color.width, color.height, 3) {
+            bail!("it is {w}×{h}×{c}, the color {}×{}×3", color.width, color.height)
+        }
+        Ok(v)
+    };
     let variance = match model.features().iter().position(|&f| f == Feature::Variance) {
         _ if !args.keep_exact => None,
         Some(i) => Some(aux[i].clone()),
@@ -110,27 +116,13 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
                 }
                 (None, None) => None,
             };
-            let usable = read.map(|r| {
-                r.and_then(|v| {
-                    if (v.width, v.height, v.channels) != (color.width, color.height, 3) {
-                        bail!(
-                            "it is {}×{}×{}, the color {}×{}×3",
-                            v.width,
-                            v.height,
-                            v.channels,
-                            color.width,
-                            color.height
-                        )
-                    }
-                    Ok(v)
-                })
-            });
-            match usable {
+            match read.map(|r| r.and_then(matches_color)) {
+                Some(Ok(v)) => Some(v),
                 Some(Err(e)) => {
                     eprintln!("warning: no exact pixels kept: the variance is unusable: {e:#}");
                     None
                 }
-                other => other.transpose()?,
+                None => None,
             }
         }
     };
