@@ -68,6 +68,10 @@ pub fn run_args(run: &Run, scale: &Scale, dataset: &Path, dir: &Path) -> (Vec<St
     let mut eval = vec!["eval".into(), "--dataset".into(), d, "--model".into()];
     eval.push(train_dir.join("model.safetensors").display().to_string());
     eval.extend(["--out".into(), dir.join("eval").display().to_string()]);
+    // The networks as they are, without `hush eval`'s step that keeps pixels whose samples all agreed: the
+    // study compares networks, and the recorded runs, which a fresh clone restores beside new ones, were
+    // evaluated before the step existed.
+    eval.extend(["--keep-exact".into(), "false".into()]);
     eval.extend(flags(&scale.eval));
     if let Some(device) = &scale.device {
         for args in [&mut train, &mut eval] {
@@ -595,6 +599,8 @@ mod tests {
                 "/r/b/train/model.safetensors",
                 "--out",
                 "/r/b/eval",
+                "--keep-exact",
+                "false",
                 "--timing-runs",
                 "1"
             ]
