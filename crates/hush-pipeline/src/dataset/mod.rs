@@ -287,3 +287,40 @@ pub fn build(plan: &DatasetPlan, renderer: &Renderer, observer: &dyn Observer) -
         manifest: ctx.own_path,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use hush_trace::{GpuContext, Renderer};
+
+    use super::{DatasetPlan, build};
+    use crate::observer::Quiet;
+
+    /// The next scene's kernel, compiled while the current scene renders, is the one its renders then use:
+    /// two scenes of different kernels (the box's triangles, the analytic test scene's shapes) cost two
+    /// compilations, not three; both scenes' views are written.
+    #[test]
+    fn each_scene_kernel_compiles_once_with_the_next_one_prepared() {
+        let gpu = GpuContext::new().expect("a Vulkan adapter (lavapipe: apt-get install mesa-vulkan-drivers)");
+        let renderer = Renderer::new(&gpu).unwrap();
+        let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data");
+        let scenes = vec![data.join("scenes/cbox/scene.xml"), data.join("tests/mitsuba/analytic/scene.xml")];
+        let dir = std::env::temp_dir().join(format!("hush-prepare-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let plan = DatasetPlan {
+            views: 1,
+            test_views: 0,
+            spp: vec![1, 2],
+            ref_spp: 2,
+            ref_supersample: 1,
+            aux_spp: 1,
+            size: Some(16),
+            ..DatasetPlan::new(&dir, scenes)
+        };
+        let summary = build(&plan, &renderer, &Quiet).unwrap();
+        assert_eq!(summary.views, 2);
+        assert_eq!(renderer.kernels_compiled(), 2, "a prepared kernel was compiled again by its scene's renders");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
