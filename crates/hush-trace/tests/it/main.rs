@@ -508,7 +508,7 @@ fn spheres_under_a_sky_match_mitsuba_to_a_tenth_of_a_percent() {
 
 /// `render_within` stops at pass granularity, and neither check depends on the machine's speed:
 /// a limit shorter than any pass still renders exactly one pass, the same image as `render` at
-/// the spp it reached (8² pixels: 16 samples per pass with or without a limit, so the same
+/// the spp it reached (8² pixels: 16 samples per pass under a limit; `render` of those 16 spp takes them in one pass too, so the same
 /// dispatches, bit for bit); an hour's limit with an spp cap stops at the cap (40 spp is
 /// 16 + 16 + 8 in three passes).
 #[test]
