@@ -8,8 +8,9 @@ use glam::Vec3;
 
 /// Leaves hold at most this many triangles.
 pub const MAX_LEAF_TRIANGLES: usize = 4;
-/// SAH bins per axis.
-const BINS: usize = 12;
+/// SAH bins per axis. 32 instead of 12 took the rays of living-room (143k triangles, lavapipe, 384×216,
+/// 8 spp) from 15.0 to 12.9 node steps each and rendered it 1.06× as fast (three alternating pairs).
+const BINS: usize = 32;
 /// The deepest node split by the SAH; deeper ones split their range in half (see `Builder::build`).
 pub const MAX_SAH_DEPTH: usize = 48;
 /// Cost of one ray-box test relative to one ray-triangle test, in the SAH.
