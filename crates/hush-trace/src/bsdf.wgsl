@@ -22,6 +22,13 @@ const FLAG_BECKMANN: u32 = 4u;
 override HAS_ROUGH_DIELECTRIC: bool = true;
 override HAS_ROUGH_PLASTIC: bool = true;
 override HAS_BECKMANN: bool = true;
+// Smooth conductors (mirrors), rough conductors, smooth dielectrics, thin dielectrics and smooth
+// plastics: a CPU driver runs every kind's code in every bounce, whatever the lanes hit.
+override HAS_SMOOTH_CONDUCTOR: bool = true;
+override HAS_ROUGH_CONDUCTOR: bool = true;
+override HAS_DIELECTRIC: bool = true;
+override HAS_THIN_DIELECTRIC: bool = true;
+override HAS_PLASTIC: bool = true;
 
 // One material, as flattened by upload.rs.
 //   a: rgb = diffuse reflectance (diffuse, plastic) or specular reflectance (conductor,
@@ -496,7 +503,7 @@ fn bsdf_eval_pdf(m: Material, wo_in: vec3<f32>, wi_in: vec3<f32>) -> vec4<f32> {
     }
     if kind == KIND_CONDUCTOR {
         let alpha = m.a.w;
-        if alpha == 0.0 {
+        if !HAS_ROUGH_CONDUCTOR || alpha == 0.0 {
             return vec4<f32>(0.0);
         }
         let bk = mf_beckmann(m);
@@ -510,6 +517,9 @@ fn bsdf_eval_pdf(m: Material, wo_in: vec3<f32>, wi_in: vec3<f32>) -> vec4<f32> {
     }
     if HAS_ROUGH_PLASTIC && m.a.w > 0.0 {
         return rough_plastic_eval_pdf(m, wo, wi, plastic_transmittance(m, wo.z));
+    }
+    if !HAS_PLASTIC {
+        return vec4<f32>(0.0);
     }
     // Plastic: only the diffuse base is non-delta.
     let f_o = fresnel_dielectric(wo.z, m.b.w).r;
@@ -533,7 +543,7 @@ fn bsdf_sample(m: Material, wo_in: vec3<f32>, u: vec2<f32>, u_lobe: f32) -> Bsdf
     if HAS_ROUGH_DIELECTRIC && kind == KIND_DIELECTRIC && m.a.w > 0.0 {
         return rough_dielectric_sample(m, wo_in, u, u_lobe);
     }
-    if kind == KIND_DIELECTRIC {
+    if HAS_DIELECTRIC && kind == KIND_DIELECTRIC {
         let fr = fresnel_dielectric(wo_in.z, m.b.w);
         if u_lobe <= fr.r {
             return BsdfSample(vec3<f32>(-wo_in.x, -wo_in.y, wo_in.z), m.a.xyz, fr.r, true, true);
@@ -542,7 +552,7 @@ fn bsdf_sample(m: Material, wo_in: vec3<f32>, u: vec2<f32>, u_lobe: f32) -> Bsdf
         let wi = vec3<f32>(-fr.eta_ti * wo_in.x, -fr.eta_ti * wo_in.y, fr.cos_t);
         return BsdfSample(normalize(wi), m.b.xyz * fr.eta_ti * fr.eta_ti, 1.0 - fr.r, true, true);
     }
-    if kind == KIND_THIN_DIELECTRIC {
+    if HAS_THIN_DIELECTRIC && kind == KIND_THIN_DIELECTRIC {
         var r = fresnel_dielectric(abs(wo_in.z), m.b.w).r;
         let t = 1.0 - r;
         // Light bouncing inside the thin slab (Mitsuba's thindielectric).
@@ -565,7 +575,7 @@ fn bsdf_sample(m: Material, wo_in: vec3<f32>, u: vec2<f32>, u_lobe: f32) -> Bsdf
         s = BsdfSample(wi, m.a.xyz, wi.z * INV_PI, false, wi.z > 0.0);
     } else if kind == KIND_CONDUCTOR {
         let alpha = m.a.w;
-        if alpha == 0.0 {
+        if HAS_SMOOTH_CONDUCTOR && (!HAS_ROUGH_CONDUCTOR || alpha == 0.0) {
             let wi = vec3<f32>(-wo.x, -wo.y, wo.z);
             s = BsdfSample(wi, fresnel_conductor(wo.z, m.c.xyz, m.d.xyz) * m.a.xyz, 1.0, true, true);
         } else {
@@ -580,7 +590,7 @@ fn bsdf_sample(m: Material, wo_in: vec3<f32>, u: vec2<f32>, u_lobe: f32) -> Bsdf
         }
     } else if HAS_ROUGH_PLASTIC && m.a.w > 0.0 {
         s = rough_plastic_sample(m, wo, u, u_lobe);
-    } else {
+    } else if HAS_PLASTIC {
         // Plastic: the specular coat with probability ∝ its Fresnel reflectance × sampling weight.
         let f_o = fresnel_dielectric(wo.z, m.b.w).r;
         let p_spec = f_o * m.d.w;

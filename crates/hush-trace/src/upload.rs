@@ -448,6 +448,15 @@ pub struct KernelFeatures {
     pub rough_dielectric: bool,
     pub rough_plastic: bool,
     pub beckmann: bool,
+    /// A mirror (a conductor of alpha 0).
+    pub smooth_conductor: bool,
+    /// A conductor with a microfacet distribution (alpha > 0).
+    pub rough_conductor: bool,
+    /// Smooth glass (a dielectric of alpha 0 that is not thin).
+    pub dielectric: bool,
+    pub thin_dielectric: bool,
+    /// A plastic with a smooth coat (alpha 0).
+    pub plastic: bool,
     /// Few enough triangles and shapes ([`FLAT_SCAN_MAX_TRIANGLES`], a shape counting as
     /// [`flat_scan_cost`] triangles) that rays test them all instead of walking the BVH.
     pub flat_scan: bool,
@@ -498,6 +507,11 @@ impl KernelFeatures {
         rough_dielectric: true,
         rough_plastic: true,
         beckmann: true,
+        smooth_conductor: true,
+        rough_conductor: true,
+        dielectric: true,
+        thin_dielectric: true,
+        plastic: true,
         flat_scan: false,
         shapes: true,
         many_shapes: true,
@@ -514,6 +528,11 @@ impl KernelFeatures {
         rough_dielectric: false,
         rough_plastic: false,
         beckmann: false,
+        smooth_conductor: false,
+        rough_conductor: false,
+        dielectric: false,
+        thin_dielectric: false,
+        plastic: false,
         flat_scan: false,
         shapes: false,
         many_shapes: false,
@@ -547,13 +566,23 @@ impl KernelFeatures {
         for m in scene.meshes.iter().map(|m| &m.material) {
             f.textures |= m.texture().is_some();
             let (alpha, distribution) = match *m {
-                Material::Conductor { alpha, distribution, .. } => (alpha, distribution),
+                Material::Conductor { alpha, distribution, .. } => {
+                    f.smooth_conductor |= alpha == 0.0;
+                    f.rough_conductor |= alpha > 0.0;
+                    (alpha, distribution)
+                }
+                Material::Dielectric { thin: true, .. } => {
+                    f.thin_dielectric = true;
+                    continue;
+                }
                 Material::Dielectric { alpha, distribution, thin: false, .. } => {
                     f.rough_dielectric |= alpha > 0.0;
+                    f.dielectric |= alpha == 0.0;
                     (alpha, distribution)
                 }
                 Material::Plastic { alpha, distribution, .. } => {
                     f.rough_plastic |= alpha > 0.0;
+                    f.plastic |= alpha == 0.0;
                     (alpha, distribution)
                 }
                 _ => continue,
