@@ -583,12 +583,12 @@ fn bounce(st: ptr<function, PathState>) -> bool {
             var a = rand();
             var b = rand();
             var lng = vec3<f32>(0.0);
-            let on_light_shape = HAS_SHAPES && lt.shape != NO_SHAPE;
+            let on_light_shape = HAS_SHAPES && (LIGHT_KINDS & LIGHT_SHAPES) != 0u && lt.shape != NO_SHAPE;
             if on_light_shape {
                 let ls = shape_light_sample(lt.shape, p, vec2<f32>(a, b));
                 lp = ls.q;
                 lng = ls.n;
-            } else {
+            } else if has_light(LIGHT_TRIANGLES) {
                 if a + b > 1.0 {
                     a = 1.0 - a;
                     b = 1.0 - b;

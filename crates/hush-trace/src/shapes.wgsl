@@ -35,6 +35,16 @@ fn shape_at(k: u32) -> Shape {
 
 // Specialization: the scene has analytic shapes.
 override HAS_SHAPES: bool = true;
+// Specialization: which kinds of emitters the scene has (hush_trace's `KernelFeatures::light_kinds`):
+// bit k for shape kind k (SHAPE_*), bit LIGHT_TRIANGLES for emitting triangles; light sampling runs
+// only their code. LIGHT_SHAPES masks the shape kinds' bits.
+override LIGHT_KINDS: u32 = 31u;
+const LIGHT_TRIANGLES: u32 = 4u;
+const LIGHT_SHAPES: u32 = 15u;
+
+fn has_light(kind: u32) -> bool {
+    return (LIGHT_KINDS & (1u << kind)) != 0u;
+}
 
 const SHAPE_SPHERE: u32 = 0u;
 const SHAPE_DISK: u32 = 1u;
@@ -205,7 +215,7 @@ fn sphere_light_outside(s: Shape, p: vec3<f32>) -> bool {
 // light slot has (its pick probability over the shape's area).
 fn shape_light_pdf(k: u32, pick: f32, p: vec3<f32>, wi: vec3<f32>, dist: f32, n: vec3<f32>) -> f32 {
     let s = shape_at(k);
-    if bitcast<u32>(s.info.x) == SHAPE_SPHERE && sphere_light_outside(s, p) {
+    if has_light(SHAPE_SPHERE) && bitcast<u32>(s.info.x) == SHAPE_SPHERE && sphere_light_outside(s, p) {
         let dc = vec3<f32>(s.w0.w, s.w1.w, s.w2.w) - p;
         let s2 = min(s.info.w * s.info.w / dot(dc, dc), 1.0);
         return pick * s.info.z / (2.0 * PI * one_minus_cos(s2));
@@ -225,7 +235,7 @@ fn shape_light_sample(k: u32, p: vec3<f32>, u: vec2<f32>) -> ShapeLightSample {
     let s = shape_at(k);
     let kind = bitcast<u32>(s.info.x);
     let phi = 2.0 * PI * u.y;
-    if kind == SHAPE_SPHERE {
+    if has_light(SHAPE_SPHERE) && kind == SHAPE_SPHERE {
         let c = vec3<f32>(s.w0.w, s.w1.w, s.w2.w);
         let r = s.info.w;
         var dir = vec3<f32>(0.0);
@@ -250,14 +260,23 @@ fn shape_light_sample(k: u32, p: vec3<f32>, u: vec2<f32>) -> ShapeLightSample {
         return ShapeLightSample(c + r * dir, flip * dir);
     }
     var local = vec3<f32>(0.0);
-    if kind == SHAPE_DISK {
+    if has_light(SHAPE_DISK) && kind == SHAPE_DISK {
         let rr = sqrt(u.x);
         local = vec3<f32>(rr * cos(phi), rr * sin(phi), 0.0);
-    } else if kind == SHAPE_RECTANGLE {
+    } else if has_light(SHAPE_RECTANGLE) && kind == SHAPE_RECTANGLE {
         local = vec3<f32>(2.0 * u.x - 1.0, 2.0 * u.y - 1.0, 0.0);
-    } else {
+    } else if has_light(SHAPE_CYLINDER) {
         local = vec3<f32>(cos(phi), sin(phi), u.x);
     }
     let q = affine(s.w0, s.w1, s.w2, local);
-    return ShapeLightSample(q, shape_surface(k, q).n);
+    // The normal as `shape_surface` gives it, for the planar shapes and the cylinder.
+    var n = normalize(s.l2.xyz);
+    if has_light(SHAPE_CYLINDER) && kind == SHAPE_CYLINDER {
+        let pl = affine(s.l0, s.l1, s.l2, q);
+        n = normalize(pl.x * s.l0.xyz + pl.y * s.l1.xyz);
+    }
+    if bitcast<u32>(s.info.y) != 0u {
+        n = -n;
+    }
+    return ShapeLightSample(q, n);
 }

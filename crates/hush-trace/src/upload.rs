@@ -34,21 +34,28 @@ const SHAPE_DISK: u32 = 1;
 const SHAPE_RECTANGLE: u32 = 2;
 const SHAPE_CYLINDER: u32 = 3;
 
+/// [`KernelFeatures::light_kinds`]' bit for emitting triangles; a shape kind's bit is `1 << SHAPE_*`.
+pub(crate) const LIGHT_TRIANGLES: u8 = 1 << 4;
+
+/// The kernel's kind of a shape: a cube is uploaded as its faces (`Analytic::cube_faces`), rectangles.
+fn shape_kind(kind: hush_scene::ShapeKind) -> u32 {
+    use hush_scene::ShapeKind;
+    match kind {
+        ShapeKind::Sphere => SHAPE_SPHERE,
+        ShapeKind::Disk => SHAPE_DISK,
+        ShapeKind::Rectangle | ShapeKind::Cube => SHAPE_RECTANGLE,
+        ShapeKind::Cylinder => SHAPE_CYLINDER,
+    }
+}
+
 impl GpuShape {
     fn new(a: &hush_scene::Analytic) -> GpuShape {
-        use hush_scene::ShapeKind;
         let rows = |m: glam::Mat4| {
             let r = m.transpose();
             [r.x_axis.to_array(), r.y_axis.to_array(), r.z_axis.to_array()]
         };
-        let kind = match a.kind {
-            ShapeKind::Sphere => SHAPE_SPHERE,
-            ShapeKind::Disk => SHAPE_DISK,
-            ShapeKind::Rectangle => SHAPE_RECTANGLE,
-            ShapeKind::Cylinder => SHAPE_CYLINDER,
-            // A cube is uploaded as its faces (`Analytic::cube_faces`).
-            ShapeKind::Cube => unreachable!("a cube is six rectangles"),
-        };
+        assert!(a.kind != hush_scene::ShapeKind::Cube, "a cube is uploaded as six rectangles");
+        let kind = shape_kind(a.kind);
         GpuShape {
             to_local: rows(a.to_world.inverse()),
             to_world: rows(a.to_world),
@@ -445,6 +452,10 @@ pub struct KernelFeatures {
     pub environment_map: bool,
     /// Some triangle or shape emits: next-event estimation samples lights as well as the environment.
     pub lights: bool,
+    /// Which emitters: bit k for an analytic shape of the kernel's kind k (sphere 0, disk 1,
+    /// rectangle 2 (a cube's faces too), cylinder 3), bit 4 for a triangle; light sampling runs
+    /// only their code (a sphere's cone sampling, for one, costs every lane of every bounce).
+    pub light_kinds: u8,
     pub rough_dielectric: bool,
     pub rough_plastic: bool,
     pub beckmann: bool,
@@ -504,6 +515,7 @@ impl KernelFeatures {
         environment: true,
         environment_map: true,
         lights: true,
+        light_kinds: LIGHT_TRIANGLES | 0b1111,
         rough_dielectric: true,
         rough_plastic: true,
         beckmann: true,
@@ -525,6 +537,7 @@ impl KernelFeatures {
         environment: false,
         environment_map: false,
         lights: false,
+        light_kinds: 0,
         rough_dielectric: false,
         rough_plastic: false,
         beckmann: false,
@@ -545,9 +558,16 @@ impl KernelFeatures {
         let mut f = KernelFeatures {
             environment: scene.environment.is_some(),
             environment_map: matches!(scene.environment, Some(Environment::Map(_))),
-            lights: scene.meshes.iter().any(|m| {
-                m.emission.is_some_and(|e| e.max_element() > 0.0) && (m.analytic.is_some() || !m.indices.is_empty())
-            }),
+            light_kinds: scene
+                .meshes
+                .iter()
+                .filter(|m| m.emission.is_some_and(|e| e.max_element() > 0.0))
+                .map(|m| match &m.analytic {
+                    Some(a) => 1 << shape_kind(a.kind),
+                    None if !m.indices.is_empty() => LIGHT_TRIANGLES,
+                    None => 0,
+                })
+                .fold(0, |kinds, k| kinds | k),
             flat_scan: scene.mesh_triangle_count()
                 + scene.meshes.iter().filter_map(|m| m.analytic).map(|a| flat_scan_cost(a.kind)).sum::<usize>()
                 <= FLAT_SCAN_MAX_TRIANGLES,
@@ -561,6 +581,7 @@ impl KernelFeatures {
                 > crate::render::UNIFORM_SHAPES,
             ..KernelFeatures::NONE
         };
+        f.lights = f.light_kinds != 0;
         f.shading_normals = scene.meshes.iter().any(|m| m.normals.is_some() && m.analytic.is_none());
         f.wide_filter = scene.film.filter != hush_scene::PixelFilter::Box;
         for m in scene.meshes.iter().map(|m| &m.material) {

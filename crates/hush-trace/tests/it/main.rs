@@ -547,18 +547,27 @@ fn time_limit_renders_whole_passes_up_to_the_spp_cap() {
 fn specialized_kernel_renders_what_the_generic_one_does() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/tests/mitsuba");
     // The rooms' walls are analytic rectangles; their spheres flat-shaded triangles.
-    let walls = KernelFeatures { shapes: true, lights: true, ..KernelFeatures::NONE };
+    // Lit by a rectangle (light kind 2): a sphere's cone sampling and the other kinds are compiled out.
+    let walls = KernelFeatures { shapes: true, lights: true, light_kinds: 1 << 2, ..KernelFeatures::NONE };
     for (path, expect) in [
         (dir.join("roughplastic"), KernelFeatures { rough_plastic: true, ..walls }),
         // Only shapes: intersected by a flat scan instead of the BVH walk of the generic kernel.
         (dir.join("textured"), KernelFeatures { textures: true, flat_scan: true, ..walls }),
-        // Lit by its map alone: next-event estimation's light side is compiled out.
-        // Its GGX conductor sphere: the mirror, glass and plastic code is compiled out.
+        // Lit by its map alone: next-event estimation's light side is compiled out; its GGX
+        // conductor sphere keeps its code while the mirror's, glass's and plastic's go.
         (
             dir.join("envmap"),
-            KernelFeatures { environment: true, environment_map: true, lights: false, rough_conductor: true, ..walls },
+            KernelFeatures {
+                environment: true,
+                environment_map: true,
+                lights: false,
+                light_kinds: 0,
+                rough_conductor: true,
+                ..walls
+            },
         ),
-        (cbox_dir(), KernelFeatures { flat_scan: true, lights: true, ..KernelFeatures::NONE }),
+        // Lit by triangles (light kind 4).
+        (cbox_dir(), KernelFeatures { flat_scan: true, lights: true, light_kinds: 1 << 4, ..KernelFeatures::NONE }),
     ] {
         let name = path.file_name().unwrap().to_string_lossy().to_string();
         let mut scene = Scene::load(&path.join("scene.xml")).unwrap();
