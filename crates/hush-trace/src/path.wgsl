@@ -393,13 +393,13 @@ fn features(m: Material) -> mat2x3<f32> {
     if kind == KIND_DIFFUSE {
         return mat2x3<f32>(m.a.xyz, vec3<f32>(0.0));
     }
-    if kind == KIND_CONDUCTOR {
+    if HAS_ROUGH_CONDUCTOR && kind == KIND_CONDUCTOR {
         return mat2x3<f32>(vec3<f32>(0.0), m.a.xyz * fresnel_conductor(1.0, m.c.xyz, m.d.xyz));
     }
-    if kind == KIND_PLASTIC {
+    if (HAS_PLASTIC || HAS_ROUGH_PLASTIC) && kind == KIND_PLASTIC {
         return mat2x3<f32>(m.a.xyz, m.b.xyz * fresnel_dielectric(1.0, m.b.w).r);
     }
-    if kind == KIND_DIELECTRIC {
+    if HAS_ROUGH_DIELECTRIC && kind == KIND_DIELECTRIC {
         // Rough glass (smooth glass is followed, never a feature): its reflection and
         // transmission tints, averaged.
         return mat2x3<f32>(vec3<f32>(0.0), 0.5 * (m.a.xyz + m.b.xyz));
