@@ -372,6 +372,9 @@ struct LightTri {
     area_pdf: f32,
     emission: vec3<f32>,
     shape: u32,
+    // The shape's record (shapes.wgsl) when `shape` is not NO_SHAPE: written in with the lights as
+    // literals, where loading it took a gather per lane of every bounce's light sample.
+    record: Shape,
 }
 
 struct Sample {
@@ -547,7 +550,7 @@ fn bounce(st: ptr<function, PathState>) -> bool {
         if !prev_delta {
             var light_pdf = hit.area_pdf * hit.t * hit.t / dot(ng, -d);
             if on_shape {
-                light_pdf = shape_light_pdf(hit.shape, hit.area_pdf, o, d, hit.t, ng);
+                light_pdf = shape_light_pdf(shape_at(hit.shape), hit.area_pdf, o, d, hit.t, ng);
             }
             weight = power_heuristic(prev_pdf, (1.0 - env.radiance.w) * light_pdf);
         }
@@ -585,7 +588,7 @@ fn bounce(st: ptr<function, PathState>) -> bool {
             var lng = vec3<f32>(0.0);
             let on_light_shape = HAS_SHAPES && (LIGHT_KINDS & LIGHT_SHAPES) != 0u && lt.shape != NO_SHAPE;
             if on_light_shape {
-                let ls = shape_light_sample(lt.shape, p, vec2<f32>(a, b));
+                let ls = shape_light_sample(lt.record, p, vec2<f32>(a, b));
                 lp = ls.q;
                 lng = ls.n;
             } else if has_light(LIGHT_TRIANGLES) {
@@ -605,7 +608,7 @@ fn bounce(st: ptr<function, PathState>) -> bool {
             if cos_light > 0.0 {
                 var pdf = lt.area_pdf * dist2 / cos_light;
                 if on_light_shape {
-                    pdf = shape_light_pdf(lt.shape, lt.area_pdf, p, wi, dist, lng);
+                    pdf = shape_light_pdf(lt.record, lt.area_pdf, p, wi, dist, lng);
                 }
                 light_pdf = (1.0 - env_pick) * pdf;
                 radiance = lt.emission;

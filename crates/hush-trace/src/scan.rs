@@ -218,13 +218,14 @@ fn light_source(flat: &GpuScene) -> String {
         let t = &flat.tris[l.tri as usize];
         let emission = flat.materials[t.p0[3].to_bits() as usize].emission;
         let value = format!(
-            "LightTri({}, {}, {}, {}, {}, {:#x}u)",
+            "LightTri({}, {}, {}, {}, {}, {:#x}u, {})",
             vec3(&t.p0),
             vec3(&t.e1),
             vec3(&t.e2),
             literal(t.e1[3]),
             vec3(&emission),
-            tag(t).wrapping_sub(1)
+            tag(t).wrapping_sub(1),
+            shape_record(flat, t)
         );
         if k == 0 {
             let _ = writeln!(s, "    var l = {value};");
@@ -235,6 +236,25 @@ fn light_source(flat: &GpuScene) -> String {
     }
     s.push_str("    return l;\n}\n");
     s
+}
+
+/// The record of the shape a light slot names, as a `Shape` literal (zeros for a triangle); its kind and
+/// flip are integers as float bits, so they are written as bitcasts.
+fn shape_record(flat: &GpuScene, t: &crate::upload::GpuTri) -> String {
+    let Some(shape) = tag(t).checked_sub(1).map(|k| &flat.shapes[k as usize]) else {
+        return "Shape(vec4<f32>(), vec4<f32>(), vec4<f32>(), vec4<f32>(), vec4<f32>(), vec4<f32>(), vec4<f32>())"
+            .to_string();
+    };
+    let rows: Vec<String> = shape.to_local.iter().chain(&shape.to_world).map(vec4).collect();
+    let [kind, flip, area, radius] = shape.info;
+    format!(
+        "Shape({}, vec4<f32>(bitcast<f32>({:#x}u), bitcast<f32>({:#x}u), {}, {}))",
+        rows.join(", "),
+        kind.to_bits(),
+        flip.to_bits(),
+        literal(area),
+        literal(radius)
+    )
 }
 
 #[cfg(test)]

@@ -19,6 +19,7 @@ fn pick_light(u: f32) -> u32 {
 fn light_triangle(u: f32) -> LightTri {
     let t = tris[lights[pick_light(u)].tri];
     let emission = materials[bitcast<u32>(t.p0.w)].emission.xyz;
-    // A triangle's tag is 0, so its shape is 0 − 1 = NO_SHAPE.
-    return LightTri(t.p0.xyz, t.e1.xyz, t.e2.xyz, t.e1.w, emission, bitcast<u32>(t.e2.w) - 1u);
+    // A triangle's tag is 0, so its shape is 0 − 1 = NO_SHAPE (whose record is never read).
+    let shape = bitcast<u32>(t.e2.w) - 1u;
+    return LightTri(t.p0.xyz, t.e1.xyz, t.e2.xyz, t.e1.w, emission, shape, shape_at(select(0u, shape, shape != NO_SHAPE)));
 }

@@ -210,11 +210,10 @@ fn sphere_light_outside(s: Shape, p: vec3<f32>) -> bool {
     return dot(dc, dc) > r * r;
 }
 
-// The solid-angle density, from p, with which `shape_light_sample` picks the point `q` of shape k
-// (normal n) seen along unit wi at distance dist; `pick` is the probability per unit area the
+// The solid-angle density, from p, with which `shape_light_sample` picks the point `q` of shape s
+// (its record; normal n) seen along unit wi at distance dist; `pick` is the probability per unit area the
 // light slot has (its pick probability over the shape's area).
-fn shape_light_pdf(k: u32, pick: f32, p: vec3<f32>, wi: vec3<f32>, dist: f32, n: vec3<f32>) -> f32 {
-    let s = shape_at(k);
+fn shape_light_pdf(s: Shape, pick: f32, p: vec3<f32>, wi: vec3<f32>, dist: f32, n: vec3<f32>) -> f32 {
     if has_light(SHAPE_SPHERE) && bitcast<u32>(s.info.x) == SHAPE_SPHERE && sphere_light_outside(s, p) {
         let dc = vec3<f32>(s.w0.w, s.w1.w, s.w2.w) - p;
         let s2 = min(s.info.w * s.info.w / dot(dc, dc), 1.0);
@@ -228,11 +227,10 @@ struct ShapeLightSample {
     n: vec3<f32>,
 }
 
-// A point on shape k for light sampling from p: a sphere by the cone it subtends (Mitsuba's
+// A point on shape s (its record) for light sampling from p: a sphere by the cone it subtends (Mitsuba's
 // `sample_direction`, after akalin.com/sampling-visible-sphere) when p is outside it, every
 // other case uniformly by area; `shape_light_pdf` gives the density.
-fn shape_light_sample(k: u32, p: vec3<f32>, u: vec2<f32>) -> ShapeLightSample {
-    let s = shape_at(k);
+fn shape_light_sample(s: Shape, p: vec3<f32>, u: vec2<f32>) -> ShapeLightSample {
     let kind = bitcast<u32>(s.info.x);
     let phi = 2.0 * PI * u.y;
     if has_light(SHAPE_SPHERE) && kind == SHAPE_SPHERE {
