@@ -241,7 +241,7 @@ impl<'a> Renderer<'a> {
             ("HAS_TEXTURES", flag(features.textures)),
             ("HAS_ENV", flag(features.environment)),
             ("HAS_ENV_MAP", flag(features.environment_map)),
-            ("HAS_LIGHTS", flag(features.lights)),
+            ("HAS_LIGHTS", flag(features.lights())),
             ("LIGHT_KINDS", features.light_kinds as f64),
             ("HAS_ROUGH_DIELECTRIC", flag(features.rough_dielectric)),
             ("HAS_ROUGH_PLASTIC", flag(features.rough_plastic)),

@@ -36,6 +36,8 @@ const SHAPE_CYLINDER: u32 = 3;
 
 /// [`KernelFeatures::light_kinds`]' bit for emitting triangles; a shape kind's bit is `1 << SHAPE_*`.
 pub(crate) const LIGHT_TRIANGLES: u8 = 1 << 4;
+/// The shape kinds' bits of [`KernelFeatures::light_kinds`].
+const LIGHT_SHAPES: u8 = 0b1111;
 
 /// The kernel's kind of a shape: a cube is uploaded as its faces (`Analytic::cube_faces`), rectangles.
 fn shape_kind(kind: hush_scene::ShapeKind) -> u32 {
@@ -450,11 +452,10 @@ pub struct KernelFeatures {
     pub environment: bool,
     /// The environment is an image (Mitsuba's `envmap`), not a constant.
     pub environment_map: bool,
-    /// Some triangle or shape emits: next-event estimation samples lights as well as the environment.
-    pub lights: bool,
     /// Which emitters: bit k for an analytic shape of the kernel's kind k (sphere 0, disk 1,
     /// rectangle 2 (a cube's faces too), cylinder 3), bit 4 for a triangle; light sampling runs
-    /// only their code (a sphere's cone sampling, for one, costs every lane of every bounce).
+    /// only their code (a sphere's cone sampling, for one, costs every lane of every bounce). None:
+    /// next-event estimation samples the environment alone ([`KernelFeatures::lights`]).
     pub light_kinds: u8,
     pub rough_dielectric: bool,
     pub rough_plastic: bool,
@@ -514,8 +515,7 @@ impl KernelFeatures {
         textures: true,
         environment: true,
         environment_map: true,
-        lights: true,
-        light_kinds: LIGHT_TRIANGLES | 0b1111,
+        light_kinds: LIGHT_TRIANGLES | LIGHT_SHAPES,
         rough_dielectric: true,
         rough_plastic: true,
         beckmann: true,
@@ -536,7 +536,6 @@ impl KernelFeatures {
         textures: false,
         environment: false,
         environment_map: false,
-        lights: false,
         light_kinds: 0,
         rough_dielectric: false,
         rough_plastic: false,
@@ -552,6 +551,11 @@ impl KernelFeatures {
         shading_normals: false,
         wide_filter: false,
     };
+
+    /// Some triangle or shape emits: next-event estimation samples lights as well as the environment.
+    pub fn lights(&self) -> bool {
+        self.light_kinds != 0
+    }
 
     /// The features `scene` uses.
     pub fn of(scene: &Scene) -> KernelFeatures {
@@ -581,7 +585,6 @@ impl KernelFeatures {
                 > crate::render::UNIFORM_SHAPES,
             ..KernelFeatures::NONE
         };
-        f.lights = f.light_kinds != 0;
         f.shading_normals = scene.meshes.iter().any(|m| m.normals.is_some() && m.analytic.is_none());
         f.wide_filter = scene.film.filter != hush_scene::PixelFilter::Box;
         for m in scene.meshes.iter().map(|m| &m.material) {
@@ -734,7 +737,7 @@ pub(crate) fn flatten(scene: &Scene) -> Result<GpuScene, TraceError> {
     let env = environment(scene.environment.as_ref(), &mut aux, !lights.is_empty())?;
     let features = KernelFeatures::of(scene);
     debug_assert_eq!(features.many_shapes, shapes.len() > crate::render::UNIFORM_SHAPES, "shapes counted as flattened");
-    debug_assert_eq!(features.lights, !lights.is_empty(), "emitters counted as flattened");
+    debug_assert_eq!(features.lights(), !lights.is_empty(), "emitters counted as flattened");
     Ok(GpuScene { nodes, tris, shapes, normals, materials, lights, aux: aux.data, env, features })
 }
 

@@ -548,7 +548,7 @@ fn specialized_kernel_renders_what_the_generic_one_does() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/tests/mitsuba");
     // The rooms' walls are analytic rectangles; their spheres flat-shaded triangles.
     // Lit by a rectangle (light kind 2): a sphere's cone sampling and the other kinds are compiled out.
-    let walls = KernelFeatures { shapes: true, lights: true, light_kinds: 1 << 2, ..KernelFeatures::NONE };
+    let walls = KernelFeatures { shapes: true, light_kinds: 1 << 2, ..KernelFeatures::NONE };
     for (path, expect) in [
         (dir.join("roughplastic"), KernelFeatures { rough_plastic: true, ..walls }),
         // Only shapes: intersected by a flat scan instead of the BVH walk of the generic kernel.
@@ -557,17 +557,10 @@ fn specialized_kernel_renders_what_the_generic_one_does() {
         // conductor sphere keeps its code while the mirror's, glass's and plastic's go.
         (
             dir.join("envmap"),
-            KernelFeatures {
-                environment: true,
-                environment_map: true,
-                lights: false,
-                light_kinds: 0,
-                rough_conductor: true,
-                ..walls
-            },
+            KernelFeatures { environment: true, environment_map: true, light_kinds: 0, rough_conductor: true, ..walls },
         ),
         // Lit by triangles (light kind 4).
-        (cbox_dir(), KernelFeatures { flat_scan: true, lights: true, light_kinds: 1 << 4, ..KernelFeatures::NONE }),
+        (cbox_dir(), KernelFeatures { flat_scan: true, light_kinds: 1 << 4, ..KernelFeatures::NONE }),
     ] {
         let name = path.file_name().unwrap().to_string_lossy().to_string();
         let mut scene = Scene::load(&path.join("scene.xml")).unwrap();
