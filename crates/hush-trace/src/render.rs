@@ -1,10 +1,11 @@
 use std::collections::{HashMap, VecDeque};
-use std::sync::Mutex;
+use std::hash::{Hash, Hasher};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use bytemuck::{Pod, Zeroable};
 use hush_dataset::Image;
-use hush_scene::{PixelFilter, Scene};
+use hush_scene::{EnvMap, Environment, Mesh, PixelFilter, Scene, Texture};
 use wgpu::util::DeviceExt;
 
 use crate::scan::{SceneLiterals, scene_source};
@@ -104,7 +105,8 @@ pub struct RenderOutput {
     pub discarded_samples: u64,
     /// What of the scene the kernel held as literals (nothing for the generic kernel).
     pub literals: SceneLiterals,
-    /// Wall-clock seconds spent tracing (upload and read-back included; compiling the kernel
+    /// Wall-clock seconds spent tracing (read-back included, and building the scene's device data where this
+    /// render built it rather than finding it kept from an earlier render of the scene; compiling the kernel
     /// specialized to the scene, once per set of features and scene data written in, is not).
     pub seconds: f64,
 }
@@ -142,6 +144,10 @@ pub struct Renderer<'a> {
     layout: wgpu::PipelineLayout,
     generic: bool,
     pipelines: Mutex<Pipelines>,
+    /// The last scenes' device data ([`Upload`]) with their [`scene_key`]s, oldest first.
+    uploads: Mutex<VecDeque<(u64, Arc<Upload>)>>,
+    /// Scenes flattened and uploaded so far ([`Renderer::scenes_uploaded`]).
+    uploaded: std::sync::atomic::AtomicUsize,
     /// Kernels compiled so far ([`Renderer::kernels_compiled`]).
     compiled: std::sync::atomic::AtomicUsize,
 }
@@ -154,6 +160,78 @@ pub(crate) const UNIFORM_SHAPES: usize = 585;
 /// Kernels with scene data written in that a [`Renderer`] keeps compiled: a dataset renders a
 /// scene many times in a row, and each scene's kernel holds at most about 100 KB of source.
 pub const MAX_CACHED_KERNELS: usize = 8;
+
+/// Scenes whose device data a [`Renderer`] keeps: the one rendering and the next one
+/// [`Renderer::prepare`]d.
+const MAX_CACHED_UPLOADS: usize = 2;
+
+/// What a render builds from a scene's geometry, materials, textures, lights and pixel filter: the
+/// flattened scene with its BVH (`flatten`), the device buffers that hold it and the kernel's scene
+/// access. It does not depend on the camera, the film's size, `max_depth` or the spp, so every view of a
+/// scene at every spp (a dataset's renders, `hush render --warm-up`'s two) shares one, as Mitsuba renders
+/// a loaded scene again without building it again (living-room took 0.35 s of CPU to flatten, its BVH
+/// and its textures as halves, on every render before).
+#[derive(Debug)]
+struct Upload {
+    features: KernelFeatures,
+    literals: SceneLiterals,
+    access: Option<String>,
+    tri_count: u32,
+    light_count: u32,
+    tris: wgpu::Buffer,
+    normals: wgpu::Buffer,
+    materials: wgpu::Buffer,
+    lights: wgpu::Buffer,
+    nodes: wgpu::Buffer,
+    aux: wgpu::Buffer,
+    env: wgpu::Buffer,
+    shapes: wgpu::Buffer,
+    first_shapes: wgpu::Buffer,
+}
+
+/// A hash of everything of `scene` that its [`Upload`] is built from, and of `generic`: scenes equal up
+/// to their cameras, film sizes, depth limits, spp and warnings have the same key. Each struct is taken
+/// apart field by field, so a field added to the scene model fails to compile here until it is hashed or
+/// named as not uploaded.
+fn scene_key(scene: &Scene, generic: bool) -> u64 {
+    let Scene { camera: _, film, max_depth: _, spp: _, meshes, textures, environment, warnings: _ } = scene;
+    let mut h = std::hash::DefaultHasher::new();
+    let floats = |h: &mut std::hash::DefaultHasher, v: &[f32]| h.write(bytemuck::cast_slice(v));
+    generic.hash(&mut h);
+    format!("{:?}", film.filter).hash(&mut h);
+    meshes.len().hash(&mut h);
+    for mesh in meshes {
+        let Mesh { name, positions, normals, uvs, indices, material, emission, analytic } = mesh;
+        name.hash(&mut h);
+        floats(&mut h, &positions.iter().flat_map(|p| p.to_array()).collect::<Vec<f32>>());
+        let normals: Option<Vec<f32>> = normals.as_ref().map(|n| n.iter().flat_map(|v| v.to_array()).collect());
+        normals.is_some().hash(&mut h);
+        floats(&mut h, normals.as_deref().unwrap_or_default());
+        let uvs: Option<Vec<f32>> = uvs.as_ref().map(|n| n.iter().flat_map(|v| v.to_array()).collect());
+        uvs.is_some().hash(&mut h);
+        floats(&mut h, uvs.as_deref().unwrap_or_default());
+        indices.hash(&mut h);
+        // Debug writes each float's shortest exact form: equal strings are equal values.
+        format!("{material:?} {emission:?} {analytic:?}").hash(&mut h);
+    }
+    textures.len().hash(&mut h);
+    for texture in textures {
+        let Texture { path, width, height, data } = texture;
+        (path, width, height).hash(&mut h);
+        floats(&mut h, data);
+    }
+    match environment {
+        None => 0u8.hash(&mut h),
+        Some(Environment::Constant { radiance }) => format!("constant {radiance:?}").hash(&mut h),
+        Some(Environment::Map(map)) => {
+            let EnvMap { path, width, height, data, scale, to_world } = map;
+            (path, width, height).hash(&mut h);
+            floats(&mut h, data);
+            format!("map {scale:?} {to_world:?}").hash(&mut h);
+        }
+    }
+    h.finish()
+}
 
 /// Compiled pipelines keyed by the features and, for a kernel with scene data written in, its
 /// scene access; those in the order they were compiled.
@@ -211,6 +289,8 @@ impl<'a> Renderer<'a> {
             layout,
             generic: false,
             pipelines: Mutex::default(),
+            uploads: Mutex::default(),
+            uploaded: 0.into(),
             compiled: 0.into(),
         })
     }
@@ -302,16 +382,97 @@ impl<'a> Renderer<'a> {
         self.compiled.load(std::sync::atomic::Ordering::Relaxed)
     }
 
-    /// Builds the kernel [`Renderer::render`] needs for `scene` (the generic one, or one specialized to the
-    /// scene's data) if it is not built yet, without rendering: a caller with a list of scenes can have the
-    /// next scene's kernel compiled on another thread while the current scene renders (on lavapipe the driver
-    /// compiles on one core while the other idles). The camera and the film's size do not enter the kernel
-    /// (its pixel filter does), so every view of the scene uses it. An error here is the one its render would
-    /// report.
+    /// How many scenes this renderer has flattened and uploaded so far: a scene's renders share one while it
+    /// stays among the last [`MAX_CACHED_UPLOADS`] (its views, spp and references alike).
+    pub fn scenes_uploaded(&self) -> usize {
+        self.uploaded.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    /// Builds the kernel and the device data [`Renderer::render`] needs for `scene` (the generic kernel, or
+    /// one specialized to the scene's data) if they are not built yet, without rendering: a caller with a list
+    /// of scenes can have the next scene prepared on another thread while the current scene renders (on
+    /// lavapipe the driver compiles on one core while the other idles). The camera, the film's size and the
+    /// depth limit enter neither (the pixel filter does), so every view of the scene uses them. An error here
+    /// is the one its render would report.
     pub fn prepare(&self, scene: &Scene) -> Result<(), TraceError> {
+        let upload = self.upload(scene)?;
+        self.pipeline(upload.features, upload.access.clone()).map(|_| ())
+    }
+
+    /// The scene's [`Upload`]: the kept one of an equal scene ([`scene_key`]), or a new one. The lock is not
+    /// held while flattening, as for kernels.
+    fn upload(&self, scene: &Scene) -> Result<Arc<Upload>, TraceError> {
+        let lock = || self.uploads.lock().map_err(|_| TraceError::Gpu("a render panicked".into()));
+        let key = scene_key(scene, self.generic);
+        if let Some((_, upload)) = lock()?.iter().find(|(k, _)| *k == key) {
+            return Ok(upload.clone());
+        }
         let flat = flatten(scene)?;
-        let features = if self.generic { KernelFeatures::ALL } else { flat.features };
-        self.pipeline(features, scene_source(&flat, scene_literals(&flat, self.generic))).map(|_| ())
+        let device = &self.gpu.device;
+        let limit = device.limits().max_storage_buffer_binding_size;
+        let aux_bytes = flat.aux.len() as u64 * 4;
+        if aux_bytes > limit {
+            return Err(TraceError::Invalid(format!(
+                "the scene's textures and tables take {aux_bytes} bytes; this device binds at most {limit}: \
+                 use smaller textures"
+            )));
+        }
+        let storage = |label: &str, bytes: &[u8]| {
+            // Empty storage buffers are not allowed: bind one zeroed element instead.
+            let padded;
+            let contents = if bytes.is_empty() {
+                padded = vec![0u8; 256];
+                &padded[..]
+            } else {
+                bytes
+            };
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+        };
+        let first_shapes = {
+            let mut bytes = vec![0u8; UNIFORM_SHAPES * std::mem::size_of::<GpuShape>()];
+            let first = &flat.shapes[..flat.shapes.len().min(UNIFORM_SHAPES)];
+            bytes[..std::mem::size_of_val(first)].copy_from_slice(bytemuck::cast_slice::<GpuShape, u8>(first));
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("first shapes"),
+                contents: &bytes,
+                usage: wgpu::BufferUsages::UNIFORM,
+            })
+        };
+        let literals = scene_literals(&flat, self.generic);
+        let upload = Arc::new(Upload {
+            features: if self.generic { KernelFeatures::ALL } else { flat.features },
+            literals,
+            access: scene_source(&flat, literals),
+            tri_count: flat.tris.len() as u32,
+            light_count: flat.lights.len() as u32,
+            tris: storage("tris", bytemuck::cast_slice::<GpuTri, u8>(&flat.tris)),
+            normals: storage("normals", bytemuck::cast_slice::<GpuNormals, u8>(&flat.normals)),
+            materials: storage("materials", bytemuck::cast_slice::<GpuMaterial, u8>(&flat.materials)),
+            lights: storage("lights", bytemuck::cast_slice::<GpuLight, u8>(&flat.lights)),
+            nodes: storage("bvh", bytemuck::cast_slice::<GpuWideNode, u8>(&flat.nodes)),
+            aux: storage("aux", bytemuck::cast_slice::<f32, u8>(&flat.aux)),
+            env: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("env"),
+                contents: bytemuck::bytes_of(&flat.env.uniform()),
+                usage: wgpu::BufferUsages::UNIFORM,
+            }),
+            shapes: storage("shapes", bytemuck::cast_slice::<GpuShape, u8>(&flat.shapes)),
+            first_shapes,
+        });
+        self.uploaded.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let mut uploads = lock()?;
+        if let Some((_, kept)) = uploads.iter().find(|(k, _)| *k == key) {
+            return Ok(kept.clone());
+        }
+        uploads.push_back((key, upload.clone()));
+        if uploads.len() > MAX_CACHED_UPLOADS {
+            uploads.pop_front();
+        }
+        Ok(upload)
     }
 
     /// Renders `scene` with `settings.spp` paths per pixel. `progress(done, total)` is called
@@ -359,52 +520,8 @@ impl<'a> Renderer<'a> {
             )));
         }
 
-        let flat = flatten(scene)?;
+        let upload = self.upload(scene)?;
         let device = &self.gpu.device;
-        let storage = |label: &str, bytes: &[u8]| {
-            // Empty storage buffers are not allowed: bind one zeroed element instead.
-            let padded;
-            let contents = if bytes.is_empty() {
-                padded = vec![0u8; 256];
-                &padded[..]
-            } else {
-                bytes
-            };
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents,
-                usage: wgpu::BufferUsages::STORAGE,
-            })
-        };
-        let tris = storage("tris", bytemuck::cast_slice::<GpuTri, u8>(&flat.tris));
-        let normals = storage("normals", bytemuck::cast_slice::<GpuNormals, u8>(&flat.normals));
-        let materials = storage("materials", bytemuck::cast_slice::<GpuMaterial, u8>(&flat.materials));
-        let lights = storage("lights", bytemuck::cast_slice::<GpuLight, u8>(&flat.lights));
-        let nodes = storage("bvh", bytemuck::cast_slice::<GpuWideNode, u8>(&flat.nodes));
-        let shapes = storage("shapes", bytemuck::cast_slice::<GpuShape, u8>(&flat.shapes));
-        let first_shapes = {
-            let mut bytes = vec![0u8; UNIFORM_SHAPES * std::mem::size_of::<GpuShape>()];
-            let first = &flat.shapes[..flat.shapes.len().min(UNIFORM_SHAPES)];
-            bytes[..std::mem::size_of_val(first)].copy_from_slice(bytemuck::cast_slice::<GpuShape, u8>(first));
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("first shapes"),
-                contents: &bytes,
-                usage: wgpu::BufferUsages::UNIFORM,
-            })
-        };
-        let aux_bytes = flat.aux.len() as u64 * 4;
-        if aux_bytes > limit {
-            return Err(TraceError::Invalid(format!(
-                "the scene's textures and tables take {aux_bytes} bytes; this device binds at most {limit}: \
-                 use smaller textures"
-            )));
-        }
-        let aux = storage("aux", bytemuck::cast_slice::<f32, u8>(&flat.aux));
-        let env = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("env"),
-            contents: bytemuck::bytes_of(&flat.env.uniform()),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
         let accum = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("accum"),
             size: accum_bytes,
@@ -423,26 +540,24 @@ impl<'a> Renderer<'a> {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let features = if self.generic { KernelFeatures::ALL } else { flat.features };
         let compile = Instant::now();
-        let literals = scene_literals(&flat, self.generic);
-        let pipeline = self.pipeline(features, scene_source(&flat, literals))?;
+        let pipeline = self.pipeline(upload.features, upload.access.clone())?;
         start += compile.elapsed();
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("path"),
             layout: &self.bind_layout,
             entries: &[
                 wgpu::BindGroupEntry { binding: 0, resource: params_buf.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: tris.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 2, resource: normals.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 3, resource: materials.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 4, resource: lights.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: upload.tris.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: upload.normals.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 3, resource: upload.materials.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 4, resource: upload.lights.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 5, resource: accum.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 6, resource: nodes.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 7, resource: aux.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 8, resource: env.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 9, resource: shapes.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 10, resource: first_shapes.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 6, resource: upload.nodes.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 7, resource: upload.aux.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 8, resource: upload.env.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 9, resource: upload.shapes.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 10, resource: upload.first_shapes.as_entire_binding() },
             ],
         });
 
@@ -462,8 +577,8 @@ impl<'a> Renderer<'a> {
             seed_lo: settings.seed as u32,
             seed_hi: (settings.seed >> 32) as u32,
             max_depth: scene.max_depth,
-            tri_count: flat.tris.len() as u32,
-            light_count: flat.lights.len() as u32,
+            tri_count: upload.tri_count,
+            light_count: upload.light_count,
             filter_kind: match scene.film.filter {
                 PixelFilter::Box => 0,
                 PixelFilter::Tent { .. } => 1,
@@ -524,7 +639,7 @@ impl<'a> Renderer<'a> {
 
         let mut out = unpack(&data, w as usize, h as usize, done);
         out.passes = passes;
-        out.literals = literals;
+        out.literals = upload.literals;
         out.seconds = start.elapsed().as_secs_f64();
         Ok(out)
     }

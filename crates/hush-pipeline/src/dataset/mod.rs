@@ -245,8 +245,9 @@ pub fn build(plan: &DatasetPlan, renderer: &Renderer, observer: &dyn Observer) -
         views::Ctx { plan, layout, renderer, observer, own, own_path, rendered: 0, done: 0, message: String::new() };
     let start = std::time::Instant::now();
     let result = std::thread::scope(|threads| {
-        // While a scene renders, the next scene's kernel compiles on another thread (the driver compiles on one
-        // core; on lavapipe that was about a tenth of a dataset's time with the other core idle). Only for a
+        // While a scene renders, the next scene's kernel compiles and its data (BVH, buffers) is built on another
+        // thread (the driver compiles on one core; on lavapipe that was about a tenth of a dataset's time with
+        // the other core idle). Only for a
         // scene this manifest has no view of yet: one with recorded views may need no render at all. An error
         // there is left to the scene's own render to report.
         let mut compiling: Option<(usize, std::thread::ScopedJoinHandle<'_, ()>)> = None;
@@ -299,7 +300,7 @@ mod tests {
 
     /// The next scene's kernel, compiled while the current scene renders, is the one its renders then use:
     /// two scenes of different kernels (the box's triangles, the analytic test scene's shapes) cost two
-    /// compilations, not three; both scenes' views are written.
+    /// compilations, not three, and two uploads of scene data; both scenes' views are written.
     #[test]
     fn each_scene_kernel_compiles_once_with_the_next_one_prepared() {
         let gpu = GpuContext::new().expect("a Vulkan adapter (lavapipe: apt-get install mesa-vulkan-drivers)");
@@ -321,6 +322,8 @@ mod tests {
         let summary = build(&plan, &renderer, &Quiet).unwrap();
         assert_eq!(summary.views, 2);
         assert_eq!(renderer.kernels_compiled(), 2, "a prepared kernel was compiled again by its scene's renders");
+        // Its noisy images, features and reference (other spp, depth limits, film sizes) share one upload.
+        assert_eq!(renderer.scenes_uploaded(), 2, "a scene was flattened and uploaded again by one of its renders");
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

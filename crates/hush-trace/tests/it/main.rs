@@ -779,9 +779,40 @@ fn prepare_compiles_the_kernel_every_view_of_the_scene_uses() {
         renderer.render(s, &RenderSettings { spp: 1, seed: 1 }, &mut |_, _| {}).unwrap();
     }
     assert_eq!(renderer.kernels_compiled(), 1, "a view of a prepared scene compiled its kernel again");
+    assert_eq!(renderer.scenes_uploaded(), 1, "a view of a prepared scene was flattened and uploaded again");
     eprintln!("prepare: {compile:?}; then two renders of 1 spp: {:?}", t.elapsed());
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/tests/mitsuba/analytic");
     let shapes = Scene::load(&dir.join("scene.xml")).unwrap();
     renderer.prepare(&shapes).unwrap();
     assert_eq!(renderer.kernels_compiled(), 2);
+}
+
+/// A scene's device data (its BVH, buffers and literals) is built once for all its renders: other cameras,
+/// film sizes and depth limits reuse it and render what a fresh renderer renders, bit for bit; a changed
+/// material or vertex builds its own.
+#[test]
+fn renders_of_one_scene_share_its_upload() {
+    let renderer = Renderer::new(gpu()).unwrap();
+    let settings = RenderSettings { spp: 2, seed: 3 };
+    let scene = cbox(8);
+    renderer.render(&scene, &settings, &mut |_, _| {}).unwrap();
+    let mut view = cbox(12);
+    view.camera.fov_y_deg *= 0.8;
+    view.max_depth = 3;
+    let kept = renderer.render(&view, &settings, &mut |_, _| {}).unwrap();
+    assert_eq!(renderer.scenes_uploaded(), 1, "a view of an uploaded scene was uploaded again");
+    let fresh = render(&view, 2, 3);
+    assert_eq!(kept.color.data, fresh.color.data, "a kept upload renders another image than a fresh one");
+    assert_eq!(kept.normal.data, fresh.normal.data);
+
+    let mut moved = scene.clone();
+    moved.meshes[0].positions[0].x += 1e-3;
+    renderer.render(&moved, &settings, &mut |_, _| {}).unwrap();
+    assert_eq!(renderer.scenes_uploaded(), 2, "a moved vertex rendered with the old scene's data");
+    let mut recoloured = scene.clone();
+    let last = recoloured.meshes.len() - 1;
+    recoloured.meshes[last].emission = Some(glam::Vec3::splat(2.0));
+    let lit = renderer.render(&recoloured, &settings, &mut |_, _| {}).unwrap();
+    assert_eq!(renderer.scenes_uploaded(), 3, "a new emitter rendered with the old scene's data");
+    assert_ne!(lit.color.data, kept.color.data);
 }
