@@ -295,8 +295,12 @@ fn trace_ray(o: vec3<f32>, d: vec3<f32>, t_max: f32, any: bool) -> Hit {
             order(&c0, &c1);
             order(&c2, &c3);
             order(&c0, &c2);
-            order(&c1, &c3);
-            order(&c1, &c2);
+            // c0 is the nearest child now. A shadow ray needs no more order: it stops at any hit (`any` is a
+            // constant in each of `intersect` and `occluded`, so this is compiled in or out).
+            if !any {
+                order(&c1, &c3);
+                order(&c1, &c2);
+            }
             if c0.t < T_MAX {
                 if c3.t < T_MAX {
                     stack[sp] = c3.entry;
