@@ -10,7 +10,8 @@
 //!   arithmetic: the Cornell box ran 1.09–1.13 against 0.87–0.88 M paths per CPU-second with
 //!   Möller–Trumbore, 256², 64 spp, lavapipe, 2 threads), or an analytic shape by its placement,
 //!   each with its material, normal and light density.
-//! - Materials, when there are at most [`MAX_LITERAL_MATERIALS`]: a chain of selections.
+//! - Materials, when there are at most [`MAX_LITERAL_MATERIALS`]: word by word, each word a chain of
+//!   selections of the values that differ from its most common one.
 //! - Triangle lights, when there are at most [`MAX_LITERAL_LIGHTS`]: a chain of selections on the
 //!   cumulative distribution, which picks what the buffer's binary search picks.
 //!
@@ -28,9 +29,10 @@ const GENERIC_MATERIAL: &str = include_str!("scene_material.wgsl");
 const GENERIC_LIGHT: &str = include_str!("scene_light.wgsl");
 
 /// Scenes with at most this many materials get them as literals. A lookup then costs a selection
-/// per material (on a CPU driver each runs in every lane) instead of a load per lane: still a gain
-/// at 28 and 37 materials (procedural rooms: 0.18 against 0.15 and 0.13–0.14 against 0.11–0.12 M paths
-/// per CPU-second with the limit at 16, 256², 32 spp, lavapipe).
+/// per differing word (on a CPU driver each runs in every lane) instead of a load per lane: a gain
+/// at 28 and 37 materials already when a lookup cost 24 selections a material (procedural rooms: 0.18
+/// against 0.15 and 0.13–0.14 against 0.11–0.12 M paths per CPU-second with the limit at 16, 256²,
+/// 32 spp, lavapipe).
 pub(crate) const MAX_LITERAL_MATERIALS: usize = 64;
 /// The same for triangle lights.
 pub(crate) const MAX_LITERAL_LIGHTS: usize = 16;
@@ -63,19 +65,6 @@ fn barycentric_rows(t: &crate::upload::GpuTri) -> [[f32; 4]; 3] {
 
 fn vec3(v: &[f32]) -> String {
     format!("vec3<f32>({}, {}, {})", literal(v[0]), literal(v[1]), literal(v[2]))
-}
-
-/// Four floats by their bits: material records hold integers (kinds, flags, texture indices)
-/// as float bits, which need not be finite or normal, so the kernel bitcasts them at run time.
-fn bits4(v: &[f32; 4]) -> String {
-    let [a, b, c, d] = v.map(f32::to_bits);
-    format!("vec4<u32>({a:#x}u, {b:#x}u, {c:#x}u, {d:#x}u)")
-}
-
-/// A material's six vec4 fields as bits.
-fn material_literal(m: &GpuMaterial) -> String {
-    let fields = [&m.a, &m.b, &m.c, &m.d, &m.emission, &m.e].map(bits4);
-    format!("array<vec4<u32>, 6>({})", fields.join(", "))
 }
 
 /// What of a scene its specialized kernel holds as literals (0: read from the buffer).
@@ -127,8 +116,7 @@ pub(crate) fn literals(flat: &GpuScene) -> SceneLiterals {
 /// functions for the others), or `None` when every part would be generic.
 pub(crate) fn scene_source(flat: &GpuScene, parts: SceneLiterals) -> Option<String> {
     let scan = (parts.triangles + parts.shapes > 0).then(|| scan_source(flat));
-    let material =
-        flat.materials.split_first().filter(|_| parts.materials > 0).map(|(m0, rest)| material_source(m0, rest));
+    let material = (parts.materials > 0 && !flat.materials.is_empty()).then(|| material_source(&flat.materials));
     let light = (parts.light_triangles > 0).then(|| light_source(flat));
     if scan.is_none() && material.is_none() && light.is_none() {
         return None;
@@ -197,16 +185,60 @@ fn scan_slot(s: &mut String, flat: &GpuScene, i: usize) {
     );
 }
 
-/// `material` as a chain of selections: `first` is material 0, `rest` the others in order.
-fn material_source(first: &GpuMaterial, rest: &[GpuMaterial]) -> String {
-    let mut s = String::from("\n// The scene's materials as literals.\nfn material(i: u32) -> Material {\n");
-    let _ = writeln!(s, "    var m = {};", material_literal(first));
-    for (k, m) in rest.iter().enumerate() {
-        let _ = writeln!(s, "    if i == {}u {{\n        m = {};\n    }}", k + 1, material_literal(m));
+/// `material` written word by word: each of its 24 words is the value most materials share, replaced
+/// by a selection for each other value, under the comparisons of `i` with the materials that have it
+/// (computed once for all words). On CPU drivers every selection runs in every lane, so a word that all
+/// materials share costs nothing and the others cost one selection a differing material; a chain of
+/// whole records (`if i == k { m = record k }`) cost 24 selections a material.
+fn material_source(materials: &[GpuMaterial]) -> String {
+    let words: Vec<[u32; 24]> = materials
+        .iter()
+        .map(|m| {
+            let mut w = [0u32; 24];
+            for (f, field) in [&m.a, &m.b, &m.c, &m.d, &m.emission, &m.e].into_iter().enumerate() {
+                for (c, x) in field.iter().enumerate() {
+                    w[4 * f + c] = x.to_bits();
+                }
+            }
+            w
+        })
+        .collect();
+    let mut s =
+        String::from("\n// The scene's materials as literals, word by word.\nfn material(i: u32) -> Material {\n");
+    let mut compared = vec![false; materials.len()];
+    let mut body = String::new();
+    for j in 0..24 {
+        // The values of word j with the materials that have each, in order of first use.
+        let mut values: Vec<(u32, Vec<usize>)> = Vec::new();
+        for (k, w) in words.iter().enumerate() {
+            match values.iter_mut().find(|(v, _)| *v == w[j]) {
+                Some((_, ks)) => ks.push(k),
+                None => values.push((w[j], vec![k])),
+            }
+        }
+        let common = (0..values.len()).max_by_key(|&v| (values[v].1.len(), usize::MAX - v)).unwrap_or(0);
+        let _ = writeln!(body, "    var w{j} = {:#x}u;", values.get(common).map_or(0, |v| v.0));
+        for (v, (value, ks)) in values.iter().enumerate() {
+            if v == common {
+                continue;
+            }
+            for &k in ks {
+                compared[k] = true;
+            }
+            let cond: Vec<String> = ks.iter().map(|k| format!("is{k}")).collect();
+            let _ = writeln!(body, "    w{j} = select(w{j}, {value:#x}u, {});", cond.join(" | "));
+        }
     }
-    s.push_str("    let f = array<vec4<f32>, 6>(bitcast<vec4<f32>>(m[0]), bitcast<vec4<f32>>(m[1]), ");
-    s.push_str("bitcast<vec4<f32>>(m[2]), bitcast<vec4<f32>>(m[3]), bitcast<vec4<f32>>(m[4]), ");
-    s.push_str("bitcast<vec4<f32>>(m[5]));\n    return Material(f[0], f[1], f[2], f[3], f[4], f[5]);\n}\n");
+    for (k, used) in compared.iter().enumerate() {
+        if *used {
+            let _ = writeln!(s, "    let is{k} = i == {k}u;");
+        }
+    }
+    s.push_str(&body);
+    let fields: Vec<String> = (0..6)
+        .map(|f| format!("bitcast<vec4<f32>>(vec4<u32>(w{}, w{}, w{}, w{}))", 4 * f, 4 * f + 1, 4 * f + 2, 4 * f + 3))
+        .collect();
+    let _ = writeln!(s, "    return Material({});\n}}", fields.join(", "));
     s
 }
 
@@ -261,6 +293,51 @@ fn shape_record(flat: &GpuScene, t: &crate::upload::GpuTri) -> String {
 mod tests {
     use super::*;
 
+    /// `material`'s source, read back by a small interpreter of its three kinds of lines, gives every
+    /// material's record word for word: shared words, words that only some materials share, a material
+    /// equal to another, and words whose bits are not finite floats.
+    #[test]
+    fn material_source_selects_each_material_word_by_word() {
+        let record = |k: u32, x: f32| GpuMaterial {
+            a: [0.5, x, 0.25, 0.0],
+            b: [f32::from_bits(0xffff_ffff), 0.0, 0.0, k as f32],
+            c: [0.0, 0.0, 0.0, f32::from_bits(k % 3)],
+            d: [0.0; 4],
+            emission: [x * x, 0.0, 0.0, 0.0],
+            e: [f32::from_bits(u32::MAX - k % 2), 1.0, 2.0, 3.0],
+        };
+        let materials: Vec<GpuMaterial> =
+            [(0, 0.1), (1, 0.2), (2, 0.1), (2, 0.1), (4, 7.0)].iter().map(|&(k, x)| record(k, x)).collect();
+        let source = material_source(&materials);
+        let hex = |t: &str| u32::from_str_radix(t.trim().trim_start_matches("0x").trim_end_matches('u'), 16).unwrap();
+        for (i, m) in materials.iter().enumerate() {
+            let mut w = [None::<u32>; 24];
+            for line in source.lines().map(str::trim) {
+                if let Some(rest) = line.strip_prefix("var w") {
+                    let (j, v) = rest.trim_end_matches(';').split_once(" = ").unwrap();
+                    w[j.parse::<usize>().unwrap()] = Some(hex(v));
+                } else if let Some(rest) = line.strip_prefix('w')
+                    && let Some((j, sel)) = rest.split_once(" = select(")
+                {
+                    let (_, rest) = sel.split_once(", ").unwrap();
+                    let (v, cond) = rest.trim_end_matches(");").split_once(", ").unwrap();
+                    if cond.split(" | ").any(|c| c.trim_start_matches("is").parse::<usize>().unwrap() == i) {
+                        w[j.parse::<usize>().unwrap()] = Some(hex(v));
+                    }
+                }
+            }
+            let expect: Vec<u32> =
+                [m.a, m.b, m.c, m.d, m.emission, m.e].iter().flatten().map(|x| x.to_bits()).collect();
+            let got: Vec<u32> = w.iter().map(|x| x.expect("every word is declared")).collect();
+            assert_eq!(got, expect, "material {i}");
+        }
+        // One selection per word and value other than its most common one: words 1 and 16 (x, x²) have
+        // three values, 7 (k) four, 11 (k mod 3) three and 20 (k odd) two; materials that share a value
+        // share its selection.
+        assert_eq!(source.matches("select(").count(), 2 + 2 + 3 + 2 + 1, "{source}");
+        assert!(source.contains("w11 = select(w11, 0x2u, is2 | is3);"), "{source}");
+    }
+
     #[test]
     fn literals_round_trip_exactly() {
         for x in [0.1f32, -1.5, 1e-20, 3.0e38, -0.0, 123456.79, f32::MIN_POSITIVE, 1.0 / 3.0] {
@@ -268,8 +345,6 @@ mod tests {
             let back: f32 = text.trim_end_matches('f').parse().unwrap();
             assert_eq!(back.to_bits(), x.to_bits(), "{x} printed as {text}");
         }
-        let nan_bits = f32::from_bits(0xffff_ffff);
-        assert!(bits4(&[nan_bits, 1e-45, 0.0, 1.0]).contains("0xffffffffu, 0x1u, 0x0u, 0x3f800000u"));
         assert!(!finite([&[0.0, f32::NAN, 1.0, 2.0]].into_iter()));
         assert!(finite([&[0.0, -0.0, 1.0, 3e38]].into_iter()));
     }
