@@ -3,7 +3,11 @@
 //!
 //! Each scene is rendered from its own file by both renderers at the same size, max_depth 8 and
 //! spp, chosen per scene (`SCENES`; `--spp N` sets every scene's) so the default run takes
-//! minutes: hush (specialized kernel, then `--generic`) and Mitsuba 3 (`llvm_ad_rgb`, 2 threads).
+//! minutes: hush's kernel specialized to the scene and Mitsuba 3 (`llvm_ad_rgb`, 2 threads), alternately
+//! `--repeats` times (3), then hush's `--generic` kernel once. A timed render lasts a few seconds, and
+//! on a shared machine one measurement moves by up to 20 %: each scene's hush/Mitsuba ratio is the
+//! median of its back-to-back pairs' ratios, each renderer's figures those of its median run, and
+//! every run is recorded (`runs`, `mpaths_per_cpu_second_pairs`).
 //! Mitsuba gets the size and depth the way hush's flags set them, the `path` integrator, and a box
 //! in place of a pixel filter hush lacks (box, tent and gaussian are kept): `load_scene` in
 //! `xtask/mitsuba_tool.py`, which lists its edits in the JSON.
@@ -29,7 +33,7 @@ use crate::util::{
 
 /// The usage of each benchmark.
 const USAGE: [&str; 5] = [
-    "bench render [--release] [--spp N (every scene)] [--only NAME] [--no-mitsuba] [--no-build]",
+    "bench render [--release] [--spp N (every scene)] [--repeats N] [--only NAME] [--no-mitsuba] [--no-build]",
     "bench dataset [--release] [--size N] [--views N] [--procedural N] [--hush PATH]",
     "bench net [--release]",
     "bench train [--release] [--steps N]",
@@ -43,6 +47,7 @@ pub fn flags(args: &[String], which: usize) -> Result<Flags> {
         0 => &[
             ("--release", Nothing),
             ("--spp", Number),
+            ("--repeats", Number),
             ("--only", Value),
             ("--no-mitsuba", Nothing),
             ("--no-build", Nothing),
@@ -170,6 +175,21 @@ const SCENES: [BenchScene; 7] = [
     },
 ];
 
+/// How many times `bench render` alternates hush's specialized kernel with Mitsuba on each scene by default.
+const REPEATS: u32 = 3;
+
+/// The run of `runs` whose `key` is the median (the upper one of an even count); a run without it (a
+/// skipped peer) is returned as it is.
+fn median_run(runs: &[serde_json::Value], key: &str) -> serde_json::Value {
+    let mut rated: Vec<&serde_json::Value> =
+        runs.iter().filter(|r| r[key].as_f64().is_some_and(f64::is_finite)).collect();
+    if rated.is_empty() {
+        return runs.first().cloned().unwrap_or(serde_json::Value::Null);
+    }
+    rated.sort_by(|a, b| a[key].as_f64().unwrap_or(0.0).total_cmp(&b[key].as_f64().unwrap_or(0.0)));
+    rated[rated.len() / 2].clone()
+}
+
 /// Every scene at its settings, max_depth 8; `render.json` holds one entry per scene.
 fn render(args: &[String]) -> Result<()> {
     const MAX_DEPTH: u32 = 8;
@@ -184,6 +204,10 @@ fn render(args: &[String]) -> Result<()> {
     };
     let spp_override = if flags.has("--spp") { Some(flags.number("--spp", 0)?) } else { None };
     let skip_mitsuba = flags.has("--no-mitsuba");
+    let repeats: u32 = flags.number("--repeats", REPEATS)?;
+    if repeats == 0 {
+        return Err("--repeats must be at least 1".into());
+    }
     let dir = target_dir().join("bench");
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
     let load_before = load_average();
@@ -211,9 +235,8 @@ fn render(args: &[String]) -> Result<()> {
         let size = [sc.width.to_string(), sc.height.to_string(), MAX_DEPTH.to_string(), spp.to_string()];
         let load_start = load_average();
 
-        // hush, specialized then generic.
-        let mut hush_runs = Vec::new();
-        for generic in [false, true] {
+        // hush's specialized kernel and Mitsuba, alternately, then hush's generic kernel once.
+        let hush_render = |generic: bool, run: u32| -> Result<(std::path::PathBuf, serde_json::Value)> {
             let kind = if generic { "generic" } else { "specialized" };
             let stats = dir.join(format!("render-hush-{}-{kind}.json", sc.name));
             let exr = dir.join(format!("render-hush-{}-{kind}.exr", sc.name));
@@ -228,9 +251,10 @@ fn render(args: &[String]) -> Result<()> {
             cmd.arg("--warm-up");
             spawn(&mut cmd)?;
             let s = read_json(&stats)?;
-            hush_runs.push((
+            Ok((
                 exr,
                 serde_json::json!({
+                    "run": run,
                     "mpaths_per_cpu_second": s["mpaths_per_cpu_second"],
                     "mpaths_per_second": s["mpaths_per_second"],
                     "cpu_seconds": s["cpu_seconds"],
@@ -239,51 +263,69 @@ fn render(args: &[String]) -> Result<()> {
                     "non_finite_values": s["non_finite_values"],
                     "adapter": s["adapter"],
                 }),
-            ));
-        }
-        let (hush_exr, mut hush_result) = hush_runs.remove(0);
-        let generic_result = hush_runs.remove(0).1;
-        let load_between = load_average();
-
-        // Mitsuba, and relMSE for hush (both need Mitsuba's venv).
-        let mitsuba_result = match mitsuba::python() {
-            _ if skip_mitsuba => serde_json::json!({ "skipped": "--no-mitsuba" }),
-            Err(e) => {
-                eprintln!("xtask: Mitsuba skipped: {e}");
-                serde_json::json!({ "skipped": e, "install": mitsuba::SETUP })
-            }
-            Ok(mut py) => {
-                if let Some(reference) = &reference {
-                    let text = output(
-                        mitsuba::python()?
-                            .arg(mitsuba::helper())
-                            .args(["relmse", "--image"])
-                            .arg(&hush_exr)
-                            .arg("--ref")
-                            .arg(reference),
-                    )?;
-                    let r: serde_json::Value = serde_json::from_str(text.trim().lines().last().unwrap_or_default())
-                        .map_err(|e| format!("relmse printed no JSON: {e}"))?;
-                    hush_result["relmse"] = r["relmse"].clone();
-                    hush_result["relmse_x_cpu_seconds"] =
-                        match (r["relmse"].as_f64(), hush_result["cpu_seconds"].as_f64()) {
-                            (Some(r), Some(c)) => serde_json::json!(r * c),
-                            _ => serde_json::Value::Null,
-                        };
-                }
-                let mstats = dir.join(format!("render-mitsuba-{}.json", sc.name));
-                py.arg(mitsuba::helper()).arg("bench").arg("--scene").arg(&scene);
-                py.args(["--spp", &size[3], "--width", &size[0], "--height", &size[1], "--max-depth", &size[2]]);
-                py.args(["--threads", "2", "--out"]).arg(dir.join(format!("render-mitsuba-{}.exr", sc.name)));
-                py.arg("--stats").arg(&mstats);
-                if let Some(reference) = &reference {
-                    py.arg("--ref").arg(reference);
-                }
-                py.stdout(std::process::Stdio::null());
-                spawn(&mut py)?;
-                read_json(&mstats)?
-            }
+            ))
         };
+        let mitsuba_render = |run: u32| -> Result<serde_json::Value> {
+            let mut py = match mitsuba::python() {
+                _ if skip_mitsuba => return Ok(serde_json::json!({ "skipped": "--no-mitsuba" })),
+                Err(e) => {
+                    eprintln!("xtask: Mitsuba skipped: {e}");
+                    return Ok(serde_json::json!({ "skipped": e, "install": mitsuba::SETUP }));
+                }
+                Ok(py) => py,
+            };
+            let mstats = dir.join(format!("render-mitsuba-{}.json", sc.name));
+            py.arg(mitsuba::helper()).arg("bench").arg("--scene").arg(&scene);
+            py.args(["--spp", &size[3], "--width", &size[0], "--height", &size[1], "--max-depth", &size[2]]);
+            py.args(["--threads", "2", "--out"]).arg(dir.join(format!("render-mitsuba-{}.exr", sc.name)));
+            py.arg("--stats").arg(&mstats);
+            if let Some(reference) = &reference {
+                py.arg("--ref").arg(reference);
+            }
+            py.stdout(std::process::Stdio::null());
+            spawn(&mut py)?;
+            let mut m = read_json(&mstats)?;
+            m["run"] = run.into();
+            Ok(m)
+        };
+        let mut hush_runs = Vec::new();
+        let mut mitsuba_runs = Vec::new();
+        let mut hush_exr = None;
+        for run in 0..repeats {
+            // Every run renders the same image (same seed and settings).
+            let (exr, h) = hush_render(false, run)?;
+            hush_exr = Some(exr);
+            hush_runs.push(h);
+            mitsuba_runs.push(mitsuba_render(run)?);
+        }
+        let hush_exr = hush_exr.expect("repeats ≥ 1");
+        let pair_ratios: Vec<serde_json::Value> = hush_runs
+            .iter()
+            .zip(&mitsuba_runs)
+            .map(|(h, m)| ratio(&h["mpaths_per_cpu_second"], &m["msamples_per_cpu_second"]))
+            .collect();
+        let mut hush_result = median_run(&hush_runs, "mpaths_per_cpu_second");
+        hush_result["runs"] = hush_runs.clone().into();
+        let mut mitsuba_result = median_run(&mitsuba_runs, "msamples_per_cpu_second");
+        if mitsuba_result.get("skipped").is_none() {
+            mitsuba_result["runs"] = mitsuba_runs.clone().into();
+        }
+        let load_between = load_average();
+        let generic_result = hush_render(true, 0)?.1;
+
+        // relMSE for hush's image (needs Mitsuba's venv).
+        if let (Some(reference), Ok(mut py), false) = (&reference, mitsuba::python(), skip_mitsuba) {
+            let text = output(
+                py.arg(mitsuba::helper()).args(["relmse", "--image"]).arg(&hush_exr).arg("--ref").arg(reference),
+            )?;
+            let r: serde_json::Value = serde_json::from_str(text.trim().lines().last().unwrap_or_default())
+                .map_err(|e| format!("relmse printed no JSON: {e}"))?;
+            hush_result["relmse"] = r["relmse"].clone();
+            hush_result["relmse_x_cpu_seconds"] = match (r["relmse"].as_f64(), hush_result["cpu_seconds"].as_f64()) {
+                (Some(r), Some(c)) => serde_json::json!(r * c),
+                _ => serde_json::Value::Null,
+            };
+        }
         if hush_result.get("relmse").is_none() {
             hush_result["relmse"] = match &reference {
                 None => "no independent reference for this scene".into(),
@@ -301,8 +343,9 @@ fn render(args: &[String]) -> Result<()> {
             "hush_generic": generic_result,
             "mitsuba": mitsuba_result,
             "hush_over_mitsuba": {
-                "mpaths_per_cpu_second":
-                    ratio(&hush_result["mpaths_per_cpu_second"], &mitsuba_result["msamples_per_cpu_second"]),
+                "mpaths_per_cpu_second": crate::bench_net::median(
+                    &pair_ratios.iter().filter_map(serde_json::Value::as_f64).collect::<Vec<_>>()),
+                "mpaths_per_cpu_second_pairs": pair_ratios,
                 "relmse_x_cpu_seconds":
                     ratio(&hush_result["relmse_x_cpu_seconds"], &mitsuba_result["relmse_x_cpu_seconds"]),
             },
@@ -317,9 +360,13 @@ fn render(args: &[String]) -> Result<()> {
     let result = serde_json::json!({
         "benchmark": "render",
         "relmse": "mean over pixels and R, G, B of (x − ref)² / (ref² + 1e-2)",
-        "note": "hush_over_mitsuba: paths per CPU-second, higher is better for hush (goal ≥ 1); relMSE × CPU-seconds, \
-                 lower is better (goal ≤ 1). specialized_over_generic: > 1 means the kernel specialized to the scene \
-                 is faster. Ratios within one scene are measured minutes apart: compare them with the load averages.",
+        "note": "hush_over_mitsuba: paths per CPU-second, higher is better for hush (goal ≥ 1), the median of the \
+                 ratios of `repeats` back-to-back pairs (each in mpaths_per_cpu_second_pairs); relMSE × CPU-seconds, \
+                 lower is better (goal ≤ 1), of the median runs. hush and mitsuba: the run with the median rate, all \
+                 runs in `runs`. specialized_over_generic: > 1 means the kernel specialized to the scene is faster \
+                 (median run against the one generic run). Compare ratios measured minutes apart with the load \
+                 averages.",
+        "repeats": repeats,
         "load_average": { "before": load_before, "after": load_average() },
         "scenes": results,
     });

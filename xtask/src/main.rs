@@ -41,7 +41,7 @@ tasks:
                              retrain the shipped models (resumable): render the dataset of the bundled and
                              procedural scenes, fine-tune OIDN's weights, evaluate against OIDN on the held-out
                              scenes, write data/models/<name>.safetensors, .tza and the model card .md
-  bench render [--release] [--spp N] [--only NAME]
+  bench render [--release] [--spp N] [--repeats N] [--only NAME]
                              M paths per CPU-second and relMSE × CPU-seconds on the Cornell box, veach-mis,
                              living-room, spheres under a sky and three procedural rooms (max_depth 8),
                              hush against Mitsuba 3 when it is installed
