@@ -38,9 +38,9 @@ override HAS_PLASTIC: bool = true;
 //   c: rgb = conductor eta; w = kind | flags << 8 (bits)
 //   d: rgb = conductor k; w = the plastic's specular sampling weight
 //   emission: rgb = radiance; w = 1 if the surface emits
-//   e: x = offset in `aux` of the texture that replaces a.rgb (bits; NO_TEXTURE: none);
+//   e: x = offset in `aux` of the texture that replaces a.rgb (bits, even; NO_TEXTURE: none);
 //      y = offset in `aux` of the rough plastic's coat transmittance table (bits);
-//      z = the rough plastic's internal reflectance
+//      z = the rough plastic's internal reflectance; w = the texture's width | height << 16 (bits)
 struct Material {
     a: vec4<f32>,
     b: vec4<f32>,
@@ -52,9 +52,13 @@ struct Material {
 
 const NO_TEXTURE: u32 = 0xffffffffu;
 
-// Images and tables that records point into (upload.rs, `Aux`). An image: width and height
-// (bits), then linear RGB texels, rows top to bottom.
+// Images and tables that records point into (upload.rs, `Aux`). An environment map: width and
+// height (bits), then linear RGB texels, rows top to bottom. A material texture: its texels alone,
+// two words each, from an even offset.
 @group(0) @binding(7) var<storage, read> aux: array<f32>;
+// The same buffer as pairs of words: a material texture's texel in one load (CPU drivers make one per
+// SIMD lane and load, so two words at once cost about what one does).
+@group(0) @binding(11) var<storage, read> aux_pairs: array<vec2<u32>>;
 
 
 fn mat_kind(m: Material) -> u32 {

@@ -23,18 +23,18 @@ fn wrap(f: f32, n: u32) -> u32 {
     return min(u32(r), n - 1u);
 }
 
-// A material texture's texel: three halves in two words (upload.rs, `push_texture`), four words
-// fewer per bilinear lookup than three floats, each of which CPU drivers load lane by lane.
+// A material texture's texel: three halves in two words (upload.rs, `push_texture`), loaded at once.
 fn texture_texel(base: u32, width: u32, x: u32, y: u32) -> vec3<f32> {
-    let i = base + 2u + 2u * (y * width + x);
-    return vec3<f32>(unpack2x16float(aux_u32(i)), unpack2x16float(aux_u32(i + 1u)).x);
+    let p = aux_pairs[(base >> 1u) + y * width + x];
+    return vec3<f32>(unpack2x16float(p.x), unpack2x16float(p.y).x);
 }
 
 // Mitsuba's `bitmap` lookup: bilinear between texel centres, repeating outside [0, 1]²;
 // (0, 0) is the top-left corner of the image.
-fn texture_lookup(base: u32, uv: vec2<f32>) -> vec3<f32> {
-    let w = aux_u32(base);
-    let h = aux_u32(base + 1u);
+// `size` is the texture's width | height << 16 (a material's e.w).
+fn texture_lookup(base: u32, size: u32, uv: vec2<f32>) -> vec3<f32> {
+    let w = size & 0xffffu;
+    let h = size >> 16u;
     let pos = uv * vec2<f32>(f32(w), f32(h)) - 0.5;
     let f = floor(pos);
     let t = pos - f;

@@ -541,7 +541,7 @@ fn bounce(st: ptr<function, PathState>) -> bool {
     }
     let tex = bitcast<u32>(mat.e.x);
     if HAS_TEXTURES && tex != NO_TEXTURE {
-        mat.a = vec4<f32>(texture_lookup(tex, uv), mat.a.w);
+        mat.a = vec4<f32>(texture_lookup(tex, bitcast<u32>(mat.e.w), uv), mat.a.w);
     }
     let delta = mat_is_delta(mat);
 

@@ -275,6 +275,7 @@ impl<'a> Renderer<'a> {
                 buffer(8, uniform),
                 buffer(9, read),
                 buffer(10, uniform),
+                buffer(11, read),
             ],
         });
         let layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -558,6 +559,7 @@ impl<'a> Renderer<'a> {
                 wgpu::BindGroupEntry { binding: 8, resource: upload.env.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 9, resource: upload.shapes.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 10, resource: upload.first_shapes.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 11, resource: upload.aux.as_entire_binding() },
             ],
         });
 

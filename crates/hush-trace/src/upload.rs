@@ -107,9 +107,10 @@ pub(crate) const NO_TEXTURE: u32 = u32::MAX;
 /// The kernel's auxiliary float array (`aux` in path.wgsl): images (textures, an environment
 /// map) and tables, each at an offset that the records using it store as bits.
 ///
-/// An image is a header (width and height, as bits) followed by its linear RGB texels, rows
-/// top to bottom: three floats each for an environment map ([`Aux::push_image`]), three halves in two
-/// words each for a material's texture ([`Aux::push_texture`]).
+/// An environment map is a header (width and height, as bits) followed by its linear RGB texels, rows
+/// top to bottom, three floats each ([`Aux::push_image`]). A material's texture is its texels alone,
+/// three halves in two words each, from an even offset (the kernel loads a texel's two words at once
+/// and takes the size from the material; [`Aux::push_texture`]).
 #[derive(Default)]
 pub(crate) struct Aux {
     pub data: Vec<f32>,
@@ -127,14 +128,16 @@ impl Aux {
         offset
     }
 
-    /// Appends a material's texture with its texels as halves (`pack2x16float(r, g)`,
-    /// `pack2x16float(b, 0)`: two words a texel instead of three, which CPU drivers load lane by lane);
-    /// returns its offset. Values are clamped to [0, 65504], the halves' finite range (a reflectance
-    /// is at most 1); a half keeps 11 significant bits, finer than an 8-bit image's steps.
-    pub fn push_texture(&mut self, width: u32, height: u32, texels: &[f32]) -> u32 {
+    /// Appends a material's texture's texels as halves (`pack2x16float(r, g)`, `pack2x16float(b, 0)`:
+    /// one load of two words a texel, where CPU drivers load a storage buffer lane by lane, one load
+    /// at a time), from an even offset, which it returns. Values are clamped to [0, 65504], the halves'
+    /// finite range (a reflectance is at most 1); a half keeps 11 significant bits, finer than an 8-bit
+    /// image's steps.
+    pub fn push_texture(&mut self, texels: &[f32]) -> u32 {
+        if self.offset() % 2 == 1 {
+            self.data.push(0.0);
+        }
         let offset = self.offset();
-        self.data.push(f32::from_bits(width));
-        self.data.push(f32::from_bits(height));
         let half = |v: f32| {
             let v = if v.is_nan() { 0.0 } else { v.clamp(0.0, 65504.0) };
             u32::from(half::f16::from_f32(v).to_bits())
@@ -146,17 +149,25 @@ impl Aux {
         offset
     }
 
-    /// The offset of a scene texture, uploaded on first use.
-    fn texture(&mut self, id: TextureId, textures: &[Texture]) -> Result<(u32, Vec3), TraceError> {
+    /// The offset of a scene texture, uploaded on first use, its size as the kernel reads it from a
+    /// material (`width | height << 16`, bits) and its mean.
+    fn texture(&mut self, id: TextureId, textures: &[Texture]) -> Result<(u32, f32, Vec3), TraceError> {
         let t = textures.get(id.0 as usize).ok_or_else(|| {
             TraceError::Invalid(format!("texture {} is referenced but the scene holds {}", id.0, textures.len()))
         })?;
-        if let Some(&offset) = self.textures.get(&id.0) {
-            return Ok((offset, t.mean()));
+        if t.width > 0xffff || t.height > 0xffff {
+            return Err(TraceError::Invalid(format!(
+                "texture {} is {}×{} texels; the kernel takes at most 65535 a side: use a smaller image",
+                id.0, t.width, t.height
+            )));
         }
-        let offset = self.push_texture(t.width, t.height, &t.data);
+        let size = f32::from_bits(t.width | t.height << 16);
+        if let Some(&offset) = self.textures.get(&id.0) {
+            return Ok((offset, size, t.mean()));
+        }
+        let offset = self.push_texture(&t.data);
         self.textures.insert(id.0, offset);
-        Ok((offset, t.mean()))
+        Ok((offset, size, t.mean()))
     }
 
     /// The offset of a rough plastic's coat-transmittance table and its internal reflectance.
@@ -185,10 +196,10 @@ pub(crate) fn gpu_material(
     textures: &[Texture],
     aux: &mut Aux,
 ) -> Result<GpuMaterial, TraceError> {
-    // A reflectance as (constant color or texture mean, texture offset or NO_TEXTURE).
+    // A reflectance as (constant color or texture mean, texture offset or NO_TEXTURE, texture size).
     let mut reflectance = |r: &Reflectance| match *r {
-        Reflectance::Rgb(v) => Ok((v, NO_TEXTURE)),
-        Reflectance::Texture(id) => aux.texture(id, textures).map(|(offset, mean)| (mean, offset)),
+        Reflectance::Rgb(v) => Ok((v, NO_TEXTURE, 0.0)),
+        Reflectance::Texture(id) => aux.texture(id, textures).map(|(offset, size, mean)| (mean, offset, size)),
     };
     let bits = |kind: u32, flags: u32| f32::from_bits(kind | flags << 8);
     let two = |t: bool| if t { FLAG_TWO_SIDED } else { 0 };
@@ -199,14 +210,14 @@ pub(crate) fn gpu_material(
     let no_texture = [f32::from_bits(NO_TEXTURE), 0.0, 0.0, 0.0];
     Ok(match *m {
         Material::Diffuse { reflectance: ref r, two_sided } => {
-            let (r, tex) = reflectance(r)?;
+            let (r, tex, size) = reflectance(r)?;
             GpuMaterial {
                 a: v4(r, 0.0),
                 b: zero,
                 c: v4(Vec3::ZERO, bits(KIND_DIFFUSE, two(two_sided))),
                 d: zero,
                 emission,
-                e: [f32::from_bits(tex), 0.0, 0.0, 0.0],
+                e: [f32::from_bits(tex), 0.0, 0.0, size],
             }
         }
         Material::Conductor { alpha, distribution, ior, specular_reflectance, two_sided } => {
@@ -250,7 +261,7 @@ pub(crate) fn gpu_material(
             nonlinear,
             two_sided,
         } => {
-            let (diffuse, tex) = reflectance(diffuse_reflectance)?;
+            let (diffuse, tex, size) = reflectance(diffuse_reflectance)?;
             let eta = int_ior / ext_ior;
             let (table, internal) = if alpha > 0.0 { aux.plastic(distribution, alpha, eta) } else { (0, 0.0) };
             // Mitsuba's plastic picks the coat with weight mean(ks) / (mean(kd) + mean(ks)),
@@ -264,7 +275,7 @@ pub(crate) fn gpu_material(
                 c: v4(Vec3::ZERO, bits(KIND_PLASTIC, flags)),
                 d: v4(Vec3::ZERO, weight),
                 emission,
-                e: [f32::from_bits(tex), f32::from_bits(table), internal, 0.0],
+                e: [f32::from_bits(tex), f32::from_bits(table), internal, size],
             }
         }
     })
@@ -745,29 +756,52 @@ pub(crate) fn flatten(scene: &Scene) -> Result<GpuScene, TraceError> {
 mod tests {
     use super::push_alias;
 
-    /// A texture's texels as the kernel's `texture_texel` reads them: a header, then per texel
+    /// A texture's texels as the kernel's `texture_texel` reads them: from an even offset, per texel
     /// `pack2x16float(r, g)` and `pack2x16float(b, 0)`; values rounded to the nearest half, clamped to
     /// [0, 65504], NaN as 0.
     #[test]
-    fn textures_are_stored_as_halves_two_words_a_texel() {
+    fn textures_are_stored_as_halves_two_words_a_texel_from_an_even_offset() {
         let mut aux = super::Aux::default();
-        aux.data.push(7.0); // something before it: the offset is where the texture starts
-        let offset = aux.push_texture(2, 1, &[0.5, 0.1, 1.0, 7e4, f32::NAN, -1.0]) as usize;
-        assert_eq!(offset, 1);
-        assert_eq!((aux.data[1].to_bits(), aux.data[2].to_bits()), (2, 1));
-        assert_eq!(aux.data.len(), 1 + 2 + 2 * 2);
+        aux.data.push(7.0); // something before it: the texture starts at the next even offset
+        let offset = aux.push_texture(&[0.5, 0.1, 1.0, 7e4, f32::NAN, -1.0]) as usize;
+        assert_eq!(offset, 2);
+        assert_eq!(aux.data.len(), 2 + 2 * 2);
+        assert_eq!(aux.push_texture(&[1.0, 1.0, 1.0]), 6, "already even: no padding");
         let halves = |w: f32| {
             let b = w.to_bits();
             [half::f16::from_bits(b as u16).to_f32(), half::f16::from_bits((b >> 16) as u16).to_f32()]
         };
         let texel = |i: usize| {
-            let (rg, b) = (halves(aux.data[3 + 2 * i]), halves(aux.data[4 + 2 * i]));
+            let (rg, b) = (halves(aux.data[offset + 2 * i]), halves(aux.data[offset + 1 + 2 * i]));
             assert_eq!(b[1], 0.0, "the fourth half is zero");
             [rg[0], rg[1], b[0]]
         };
         assert_eq!(texel(0), [0.5, half::f16::from_f32(0.1).to_f32(), 1.0]);
         assert!((texel(0)[1] - 0.1).abs() < 0.1 / 2048.0, "a half keeps 11 significant bits");
         assert_eq!(texel(1), [65504.0, 0.0, 0.0]);
+    }
+
+    /// A material carries its texture's size for the kernel (`width | height << 16`); a texture wider or
+    /// taller than that holds is an error naming it, not a wrapped size.
+    #[test]
+    fn a_material_carries_its_texture_size_and_refuses_one_too_large() {
+        use hush_scene::{Material, Reflectance, Texture, TextureId};
+        let texture = |width: u32, height: u32| Texture {
+            path: "t.png".into(),
+            width,
+            height,
+            data: vec![0.5; 3 * (width * height) as usize],
+        };
+        let diffuse = Material::Diffuse { reflectance: Reflectance::Texture(TextureId(1)), two_sided: false };
+        let mut aux = super::Aux::default();
+        let textures = [texture(1, 1), texture(3, 5)];
+        let m = super::gpu_material(&diffuse, glam::Vec3::ZERO, &textures, &mut aux).unwrap();
+        assert_eq!(m.e[3].to_bits(), 3 | 5 << 16);
+        assert_eq!(m.e[0].to_bits() % 2, 0, "an even offset");
+        let e = super::gpu_material(&diffuse, glam::Vec3::ZERO, &[texture(1, 1), texture(65536, 1)], &mut aux)
+            .err()
+            .expect("too wide");
+        assert!(e.to_string().contains("texture 1 is 65536×1") && e.to_string().contains("65535"), "{e}");
     }
 
     /// Drawing a cell uniformly, keeping it with its threshold and otherwise taking its alias picks
