@@ -359,11 +359,12 @@ fn rough_plastic_eval_pdf(m: Material, wo: vec3<f32>, wi: vec3<f32>, t_o: f32) -
     return vec4<f32>(value, ps * coat_pdf + (1.0 - ps) * wi.z * INV_PI);
 }
 
-fn rough_plastic_sample(m: Material, wo: vec3<f32>, u: vec2<f32>, u_lobe: f32) -> BsdfSample {
+// `h`: a visible normal sampled for wo with `u` (bsdf_sample), which the coat reflects about.
+fn rough_plastic_sample(m: Material, wo: vec3<f32>, h: vec3<f32>, u: vec2<f32>, u_lobe: f32) -> BsdfSample {
     let t_o = plastic_transmittance(m, wo.z);
     var wi = vec3<f32>(0.0);
     if u_lobe < rough_plastic_coat_prob(m, t_o) {
-        wi = reflect_local(wo, mf_sample_visible(wo, m.a.w, mf_beckmann(m), u));
+        wi = reflect_local(wo, h);
     } else {
         wi = cosine_local(u);
     }
@@ -413,7 +414,7 @@ fn rough_dielectric_eval_pdf(m: Material, wo: vec3<f32>, wi: vec3<f32>) -> vec4<
     let alpha = m.a.w;
     let bk = mf_beckmann(m);
     let d = mf_d(rh.h, alpha, bk);
-    // G1 and the visible-normal density are even in wo, so wo stands for rough_dielectric_pdf's wo_up.
+    // G1 and the visible-normal density are even in wo, so wo stands for rough_dielectric_sample's wo_up.
     let g1_o = mf_g1(wo, rh.h, alpha, bk);
     let g = g1_o * mf_g1(wi, rh.h, alpha, bk);
     let f = fresnel_dielectric(dot(wo, rh.h), m.b.w).r;
@@ -430,27 +431,16 @@ fn rough_dielectric_eval_pdf(m: Material, wo: vec3<f32>, wi: vec3<f32>) -> vec4<
     return vec4<f32>(value, visible * (1.0 - f) * (rh.eta * rh.eta * abs(dwi) / (denom * denom)));
 }
 
-fn rough_dielectric_pdf(m: Material, wo: vec3<f32>, wi: vec3<f32>) -> f32 {
-    let rh = rough_half(m, wo, wi);
-    if !rh.valid {
-        return 0.0;
-    }
-    let dwi = dot(wi, rh.h);
-    var jacobian = 1.0 / (4.0 * abs(dwi));
-    if !rh.reflect {
-        let denom = dot(wo, rh.h) + rh.eta * dwi;
-        jacobian = rh.eta * rh.eta * abs(dwi) / (denom * denom);
-    }
-    let wo_up = select(-wo, wo, wo.z > 0.0);
-    let f = fresnel_dielectric(dot(wo, rh.h), m.b.w).r;
-    return mf_pdf_visible(wo_up, rh.h, m.a.w, mf_beckmann(m)) * select(1.0 - f, f, rh.reflect) * jacobian;
+// wo on the side of the macro-normal, for which a rough dielectric samples its visible normals.
+fn rough_dielectric_up(wo: vec3<f32>) -> vec3<f32> {
+    return select(-wo, wo, wo.z > 0.0);
 }
 
-fn rough_dielectric_sample(m: Material, wo: vec3<f32>, u: vec2<f32>, u_lobe: f32) -> BsdfSample {
+// `h`: a visible normal sampled for rough_dielectric_up(wo) (bsdf_sample).
+fn rough_dielectric_sample(m: Material, wo: vec3<f32>, h: vec3<f32>, u_lobe: f32) -> BsdfSample {
     let alpha = m.a.w;
     let bk = mf_beckmann(m);
-    let wo_up = select(-wo, wo, wo.z > 0.0);
-    let h = mf_sample_visible(wo_up, alpha, bk, u);
+    let wo_up = rough_dielectric_up(wo);
     let fr = fresnel_dielectric(dot(wo, h), m.b.w);
     var wi = vec3<f32>(0.0);
     var weight = vec3<f32>(0.0);
@@ -470,7 +460,16 @@ fn rough_dielectric_sample(m: Material, wo: vec3<f32>, u: vec2<f32>, u_lobe: f32
     }
     wi = normalize(wi);
     let g1 = mf_g1(wi, h, alpha, bk);
-    let pdf = rough_dielectric_pdf(m, wo, wi);
+    // The density of wi from that of the sampled normal, as Mitsuba computes it: the visible-normal
+    // density, the lobe's probability and the Jacobian of the half-vector map (the same density as
+    // rough_dielectric_pdf's, without finding the normal again from wo and wi).
+    let dwo = dot(wo, h);
+    let dwi = dot(wi, h);
+    let reflected = u_lobe <= fr.r;
+    let eta = select(1.0 / m.b.w, m.b.w, wo.z > 0.0);
+    let denom = dwo + eta * dwi;
+    let jacobian = select(eta * eta * abs(dwi) / (denom * denom), 1.0 / (4.0 * abs(dwi)), reflected);
+    let pdf = mf_pdf_visible(wo_up, h, alpha, bk) * select(1.0 - fr.r, fr.r, reflected) * jacobian;
     if !(pdf > 0.0) || g1 == 0.0 {
         return no_sample();
     }
@@ -544,8 +543,18 @@ fn bsdf_pdf(m: Material, wo: vec3<f32>, wi: vec3<f32>) -> f32 {
 // Samples wi given wo; `u` drives the direction, `u_lobe` the choice between lobes.
 fn bsdf_sample(m: Material, wo_in: vec3<f32>, u: vec2<f32>, u_lobe: f32) -> BsdfSample {
     let kind = mat_kind(m);
-    if HAS_ROUGH_DIELECTRIC && kind == KIND_DIELECTRIC && m.a.w > 0.0 {
-        return rough_dielectric_sample(m, wo_in, u, u_lobe);
+    let rough_dielectric = HAS_ROUGH_DIELECTRIC && kind == KIND_DIELECTRIC && m.a.w > 0.0;
+    let two = (mat_flags(m) & FLAG_TWO_SIDED) != 0u && wo_in.z < 0.0;
+    let wo = select(wo_in, vec3<f32>(wo_in.xy, -wo_in.z), two);
+    // One visible normal serves the rough dielectric, conductor and plastic, each from its own view of
+    // wo: on a SIMD CPU the code of every kind a scene has runs in every lane, so sampling it once
+    // saves a sampler's work for each other rough kind a scene has.
+    var h = vec3<f32>(0.0, 0.0, 1.0);
+    if HAS_ROUGH_DIELECTRIC || HAS_ROUGH_CONDUCTOR || HAS_ROUGH_PLASTIC {
+        h = mf_sample_visible(select(wo, rough_dielectric_up(wo_in), rough_dielectric), m.a.w, mf_beckmann(m), u);
+    }
+    if rough_dielectric {
+        return rough_dielectric_sample(m, wo_in, h, u_lobe);
     }
     if HAS_DIELECTRIC && kind == KIND_DIELECTRIC {
         let fr = fresnel_dielectric(wo_in.z, m.b.w);
@@ -568,8 +577,6 @@ fn bsdf_sample(m: Material, wo_in: vec3<f32>, u: vec2<f32>, u_lobe: f32) -> Bsdf
         }
         return BsdfSample(-wo_in, m.b.xyz, 1.0 - r, true, true);
     }
-    let two = (mat_flags(m) & FLAG_TWO_SIDED) != 0u && wo_in.z < 0.0;
-    let wo = select(wo_in, vec3<f32>(wo_in.xy, -wo_in.z), two);
     if wo.z <= 0.0 {
         return no_sample();
     }
@@ -584,7 +591,6 @@ fn bsdf_sample(m: Material, wo_in: vec3<f32>, u: vec2<f32>, u_lobe: f32) -> Bsdf
             s = BsdfSample(wi, fresnel_conductor(wo.z, m.c.xyz, m.d.xyz) * m.a.xyz, 1.0, true, true);
         } else {
             let bk = mf_beckmann(m);
-            let h = mf_sample_visible(wo, alpha, bk, u);
             let wi = reflect_local(wo, h);
             if wi.z > 0.0 {
                 let fr = fresnel_conductor(dot(wo, h), m.c.xyz, m.d.xyz) * m.a.xyz;
@@ -593,7 +599,7 @@ fn bsdf_sample(m: Material, wo_in: vec3<f32>, u: vec2<f32>, u_lobe: f32) -> Bsdf
             }
         }
     } else if HAS_ROUGH_PLASTIC && m.a.w > 0.0 {
-        s = rough_plastic_sample(m, wo, u, u_lobe);
+        s = rough_plastic_sample(m, wo, h, u, u_lobe);
     } else if HAS_PLASTIC {
         // Plastic: the specular coat with probability ∝ its Fresnel reflectance × sampling weight.
         let f_o = fresnel_dielectric(wo.z, m.b.w).r;
