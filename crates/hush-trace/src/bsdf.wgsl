@@ -52,13 +52,16 @@ struct Material {
 
 const NO_TEXTURE: u32 = 0xffffffffu;
 
-// Images and tables that records point into (upload.rs, `Aux`). An environment map: width and
-// height (bits), then linear RGB texels, rows top to bottom. A material texture: its texels alone,
-// two words each, from an even offset.
+// Images and tables that records point into (upload.rs, `Aux`). An environment map: its linear RGB
+// texels, rows top to bottom, four words each (the fourth 0), then its sampling table, four words a
+// cell, each from a multiple of four words. A material texture: its texels, two words each, from an
+// even offset.
 @group(0) @binding(7) var<storage, read> aux: array<f32>;
 // The same buffer as pairs of words: a material texture's texel in one load (CPU drivers make one per
 // SIMD lane and load, so two words at once cost about what one does).
 @group(0) @binding(11) var<storage, read> aux_pairs: array<vec2<u32>>;
+// And as four words: an environment map's texel or sampling cell in one load.
+@group(0) @binding(12) var<storage, read> aux4: array<vec4<f32>>;
 
 
 fn mat_kind(m: Material) -> u32 {

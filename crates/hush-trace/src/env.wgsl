@@ -3,13 +3,9 @@
 
 // ---- textures ----
 
-fn aux_u32(i: u32) -> u32 {
-    return bitcast<u32>(aux[i]);
-}
-
+// An environment map's texel (upload.rs, `push_image`): one load of four words.
 fn image_texel(base: u32, width: u32, x: u32, y: u32) -> vec3<f32> {
-    let i = base + 2u + 3u * (y * width + x);
-    return vec3<f32>(aux[i], aux[i + 1u], aux[i + 2u]);
+    return aux4[base + y * width + x].xyz;
 }
 
 // An integer-valued f modulo n, in [0, n). Computed in floating point: CPU drivers have no vector
@@ -49,11 +45,11 @@ fn texture_lookup(base: u32, size: u32, uv: vec2<f32>) -> vec3<f32> {
 
 // The scene's environment (upload.rs, `GpuEnv`).
 struct Env {
-    // ENV_*; the offsets in `aux` of the map's image and of its sampling tables.
+    // ENV_*; the offsets in `aux4` of the map's image and of its sampling table; its width | height << 16.
     kind: u32,
     image: u32,
     dist: u32,
-    _pad: u32,
+    size: u32,
     // rgb: constant radiance or the map's scale; w: probability that next-event estimation
     // samples the environment rather than a triangle light.
     radiance: vec4<f32>,
@@ -96,8 +92,8 @@ struct EnvCell {
 }
 
 fn env_cell(local: vec3<f32>) -> EnvCell {
-    let w = aux_u32(env.image);
-    let h = aux_u32(env.image + 1u);
+    let w = env.size & 0xffffu;
+    let h = env.size >> 16u;
     var u = atan2(local.x, -local.z) * (0.5 * INV_PI) - 0.5 / f32(w);
     u -= floor(u);
     let v = acos(clamp(local.y, -1.0, 1.0)) * INV_PI;
@@ -109,7 +105,7 @@ fn env_cell(local: vec3<f32>) -> EnvCell {
 
 fn env_map_eval(c: EnvCell) -> vec3<f32> {
     let base = env.image;
-    let w = aux_u32(base);
+    let w = env.size & 0xffffu;
     let x1 = select(c.cell.x + 1u, 0u, c.cell.x + 1u == w);
     let top = mix(image_texel(base, w, c.cell.x, c.cell.y), image_texel(base, w, x1, c.cell.y), c.t.x);
     let bottom = mix(image_texel(base, w, c.cell.x, c.cell.y + 1u), image_texel(base, w, x1, c.cell.y + 1u), c.t.x);
@@ -124,11 +120,11 @@ fn env_eval(d: vec3<f32>) -> vec3<f32> {
     return env_map_eval(env_cell(env_to_local(d)));
 }
 
-// The map's sampling distribution over its interpolation cells, from `dist` in `aux`: per cell
+// The map's sampling distribution over its interpolation cells, from `dist` in `aux4`: per cell
 // (row-major, width × (height − 1)) the probability of keeping it when drawn uniformly, the cell
 // that replaces it otherwise (bits), and its probability (Walker's alias method, upload.rs).
 fn env_cell_prob(cell: u32) -> f32 {
-    return aux[env.dist + 3u * cell + 2u];
+    return aux4[env.dist + cell].z;
 }
 
 // Solid-angle density of env_sample (before the light-picking probability).
@@ -137,8 +133,8 @@ fn env_pdf(d: vec3<f32>) -> f32 {
         return 0.25 * INV_PI;
     }
     let c = env_cell(env_to_local(d));
-    let w = aux_u32(env.image);
-    let ny = aux_u32(env.image + 1u) - 1u;
+    let w = env.size & 0xffffu;
+    let ny = (env.size >> 16u) - 1u;
     let p = env_cell_prob(c.cell.y * w + c.cell.x) * f32(w * ny);
     return p / (2.0 * PI * PI * c.sin_theta);
 }
@@ -159,12 +155,12 @@ fn env_sample(u: vec4<f32>) -> EnvSample {
         let phi = 2.0 * PI * u.y;
         return EnvSample(vec3<f32>(r * cos(phi), r * sin(phi), z), 0.25 * INV_PI, env.radiance.xyz);
     }
-    let w = aux_u32(env.image);
-    let ny = aux_u32(env.image + 1u) - 1u;
+    let w = env.size & 0xffffu;
+    let ny = (env.size >> 16u) - 1u;
     let n = w * ny;
     let drawn = min(u32(u.x * f32(n)), n - 1u);
-    let keep = aux[env.dist + 3u * drawn];
-    let cell = select(aux_u32(env.dist + 3u * drawn + 1u), drawn, u.y < keep);
+    let entry = aux4[env.dist + drawn];
+    let cell = select(bitcast<u32>(entry.y), drawn, u.y < entry.x);
     // cell / w and cell % w, by a floating-point quotient corrected to the exact one (CPU drivers run
     // integer division lane by lane).
     var row = u32((f32(cell) + 0.5) / f32(w));

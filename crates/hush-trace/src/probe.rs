@@ -376,7 +376,7 @@ fn run_env(gpu: &GpuContext, env: GpuEnv, aux: &[f32]) -> EnvStats {
     let params = probe_params(Vec3::ZERO, 11);
     let env = env.uniform();
     let inputs =
-        [(0, &params[..], uniform), (7, bytemuck::cast_slice(aux), storage), (8, bytemuck::bytes_of(&env), uniform)];
+        [(0, &params[..], uniform), (8, bytemuck::bytes_of(&env), uniform), (12, bytemuck::cast_slice(aux), storage)];
     let data = dispatch(gpu, "env_probe_main", &inputs, 9, 8);
     let rows: Vec<&[f32]> = data.chunks_exact(8).collect();
     let col = |k: usize| rows.iter().map(move |r| r[k] as f64);
@@ -409,7 +409,9 @@ fn environment_sampling_matches_its_pdf_and_radiance() {
     for (name, e) in [("envmap", hush_scene::Environment::Map(map)), ("constant", constant)] {
         let mut aux = Aux::default();
         let env = environment(Some(&e), &mut aux, false).unwrap();
+        // Never empty, and whole four-word texels (as `flatten` leaves it).
         aux.data.push(0.0);
+        aux.align4();
         assert_eq!(env.pick, 1.0, "{name}: without triangle lights the environment is always sampled");
         let s = run_env(gpu(), env, &aux.data);
         assert!(close(s.pdf_integral, (1.0, 0.0)), "{name}: the pdf integrates to {:?}", s.pdf_integral);

@@ -276,6 +276,7 @@ impl<'a> Renderer<'a> {
                 buffer(9, read),
                 buffer(10, uniform),
                 buffer(11, read),
+                buffer(12, read),
             ],
         });
         let layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -560,6 +561,7 @@ impl<'a> Renderer<'a> {
                 wgpu::BindGroupEntry { binding: 9, resource: upload.shapes.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 10, resource: upload.first_shapes.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 11, resource: upload.aux.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 12, resource: upload.aux.as_entire_binding() },
             ],
         });
 

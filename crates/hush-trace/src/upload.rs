@@ -107,8 +107,9 @@ pub(crate) const NO_TEXTURE: u32 = u32::MAX;
 /// The kernel's auxiliary float array (`aux` in path.wgsl): images (textures, an environment
 /// map) and tables, each at an offset that the records using it store as bits.
 ///
-/// An environment map is a header (width and height, as bits) followed by its linear RGB texels, rows
-/// top to bottom, three floats each ([`Aux::push_image`]). A material's texture is its texels alone,
+/// An environment map is its linear RGB texels, rows top to bottom, four floats each (the fourth 0) from a
+/// multiple of four words ([`Aux::push_image`]; its size is in the environment's uniform), followed by its
+/// sampling table, four words a cell ([`push_alias`]). A material's texture is its texels alone,
 /// three halves in two words each, from an even offset (the kernel loads a texel's two words at once
 /// and takes the size from the material; [`Aux::push_texture`]).
 #[derive(Default)]
@@ -119,13 +120,21 @@ pub(crate) struct Aux {
 }
 
 impl Aux {
-    /// Appends an image; returns its offset.
-    pub fn push_image(&mut self, width: u32, height: u32, texels: &[f32]) -> u32 {
-        let offset = self.offset();
-        self.data.push(f32::from_bits(width));
-        self.data.push(f32::from_bits(height));
-        self.data.extend_from_slice(texels);
+    /// Appends an environment map's texels as (r, g, b, 0) from a multiple of four words; returns
+    /// its offset in texels of four words (`aux4` in the kernel: one load a texel, where CPU drivers
+    /// load a storage buffer lane by lane, one load at a time).
+    pub fn push_image(&mut self, texels: &[f32]) -> u32 {
+        let offset = self.align4();
+        self.data.extend(texels.chunks_exact(3).flat_map(|t| [t[0], t[1], t[2], 0.0]));
         offset
+    }
+
+    /// Pads the array to a multiple of four words; returns the offset in units of four words.
+    pub fn align4(&mut self) -> u32 {
+        while !self.data.len().is_multiple_of(4) {
+            self.data.push(0.0);
+        }
+        self.offset() / 4
     }
 
     /// Appends a material's texture's texels as halves (`pack2x16float(r, g)`, `pack2x16float(b, 0)`:
@@ -298,11 +307,13 @@ pub(crate) const ENV_MAP: u32 = 2;
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct GpuEnv {
     pub kind: u32,
-    /// Offset of the map's image in `aux`.
+    /// Offset of the map's image in `aux`, in units of four words.
     pub image: u32,
-    /// Offset of its sampling distribution: the marginal CDF over the height − 1 rows of
-    /// interpolation cells, then one conditional CDF over the width cells of each row.
+    /// Offset of its sampling table in `aux`, in units of four words: per interpolation cell (row-major,
+    /// width × (height − 1)) the alias method's threshold, alias (bits) and probability ([`push_alias`]).
     pub dist: u32,
+    /// The map's width | height << 16.
+    pub size: u32,
     /// Constant radiance, or the map's scale on every channel.
     pub radiance: Vec3,
     /// Probability that next-event estimation samples the environment rather than a triangle.
@@ -318,7 +329,7 @@ pub(crate) struct GpuEnvUniform {
     pub kind: u32,
     pub image: u32,
     pub dist: u32,
-    pub pad: u32,
+    pub size: u32,
     pub radiance: [f32; 4],
     pub to_world: [[f32; 4]; 3],
     pub to_local: [[f32; 4]; 3],
@@ -331,7 +342,7 @@ impl GpuEnv {
             kind: self.kind,
             image: self.image,
             dist: self.dist,
-            pad: 0,
+            size: self.size,
             radiance: v4(self.radiance, self.pick),
             to_world: columns(self.to_world),
             to_local: columns(self.to_local),
@@ -347,6 +358,7 @@ fn luminance(rgb: &[f32]) -> f64 {
 /// Appends Walker's alias table of `weights` (normalized; uniform if they are all 0), per cell the
 /// probability of keeping it, its alias (bits) and its probability, and returns their sum.
 fn push_alias(aux: &mut Vec<f32>, weights: &[f64]) -> f64 {
+    debug_assert!(aux.len().is_multiple_of(4), "the table is read four words a cell");
     let n = weights.len();
     let total: f64 = weights.iter().sum();
     let prob: Vec<f64> = weights.iter().map(|&w| if total > 0.0 { w / total } else { 1.0 / n as f64 }).collect();
@@ -367,7 +379,7 @@ fn push_alias(aux: &mut Vec<f32>, weights: &[f64]) -> f64 {
     }
     // What is left (rounding) keeps itself.
     for i in 0..n {
-        aux.extend([keep[i] as f32, f32::from_bits(alias[i]), prob[i] as f32]);
+        aux.extend([keep[i] as f32, f32::from_bits(alias[i]), prob[i] as f32, 0.0]);
     }
     total
 }
@@ -387,6 +399,7 @@ pub(crate) fn environment(
         kind: ENV_NONE,
         image: 0,
         dist: 0,
+        size: 0,
         radiance: Vec3::ZERO,
         pick: 0.0,
         to_world: Mat3::IDENTITY,
@@ -402,9 +415,9 @@ pub(crate) fn environment(
         }
         Some(Environment::Map(map)) => {
             let (w, h) = (map.width as usize, map.height as usize);
-            if w < 1 || h < 2 || map.data.len() != w * h * 3 {
+            if w < 1 || h < 2 || w > 0xffff || h > 0xffff || map.data.len() != w * h * 3 {
                 return Err(TraceError::Invalid(format!(
-                    "environment map {} is {w}×{h}: it needs at least 2 rows of RGB pixels",
+                    "environment map {} is {w}×{h}: it needs at least 2 rows of RGB pixels and at most 65535 a side",
                     map.path.display()
                 )));
             }
@@ -419,7 +432,8 @@ pub(crate) fn environment(
             env.radiance = Vec3::splat(map.scale);
             env.to_world = linear;
             env.to_local = linear.inverse();
-            env.image = aux.push_image(map.width, map.height, &map.data);
+            env.image = aux.push_image(&map.data);
+            env.size = map.width | map.height << 16;
             let lum: Vec<f64> = map.data.chunks_exact(3).map(luminance).collect();
             let ny = h - 1;
             let mut cells = Vec::with_capacity(ny * w);
@@ -431,7 +445,7 @@ pub(crate) fn environment(
                     cells.push(0.25 * l * sin_theta);
                 }
             }
-            env.dist = aux.offset();
+            env.dist = aux.align4();
             let total = push_alias(&mut aux.data, &cells);
             env.pick = if total > 0.0 && map.scale > 0.0 { pick } else { 0.0 };
         }
@@ -749,6 +763,8 @@ pub(crate) fn flatten(scene: &Scene) -> Result<GpuScene, TraceError> {
     let features = KernelFeatures::of(scene);
     debug_assert_eq!(features.many_shapes, shapes.len() > crate::render::UNIFORM_SHAPES, "shapes counted as flattened");
     debug_assert_eq!(features.lights(), !lights.is_empty(), "emitters counted as flattened");
+    // A whole number of four-word texels, for the kernel's four-word view of the array.
+    aux.align4();
     Ok(GpuScene { nodes, tris, shapes, normals, materials, lights, aux: aux.data, env, features })
 }
 
@@ -819,14 +835,14 @@ mod tests {
             let n = weights.len();
             let mut picked = vec![0.0f64; n];
             for i in 0..n {
-                let (keep, alias) = (aux[3 * i] as f64, aux[3 * i + 1].to_bits() as usize);
+                let (keep, alias) = (aux[4 * i] as f64, aux[4 * i + 1].to_bits() as usize);
                 assert!((0.0..=1.0).contains(&keep) && alias < n);
                 picked[i] += keep / n as f64;
                 picked[alias] += (1.0 - keep) / n as f64;
             }
             for i in 0..n {
                 let want = if total > 0.0 { weights[i] / total } else { 1.0 / n as f64 };
-                assert!((aux[3 * i + 2] as f64 - want).abs() <= 1e-7 * want.max(1e-30) + 1e-12);
+                assert!((aux[4 * i + 2] as f64 - want).abs() <= 1e-7 * want.max(1e-30) + 1e-12);
                 assert!((picked[i] - want).abs() <= 1e-6 * want + 1e-9, "cell {i}: picked {} want {want}", picked[i]);
                 if want == 0.0 {
                     assert_eq!(picked[i], 0.0, "cell {i} has no weight and must never be picked");
