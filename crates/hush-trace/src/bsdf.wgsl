@@ -464,8 +464,8 @@ fn rough_dielectric_sample(m: Material, wo: vec3<f32>, h: vec3<f32>, u_lobe: f32
     wi = normalize(wi);
     let g1 = mf_g1(wi, h, alpha, bk);
     // The density of wi from that of the sampled normal, as Mitsuba computes it: the visible-normal
-    // density, the lobe's probability and the Jacobian of the half-vector map (the same density as
-    // rough_dielectric_pdf's, without finding the normal again from wo and wi).
+    // density, the lobe's probability and the Jacobian of the half-vector map (the density that
+    // rough_dielectric_eval_pdf finds for wi from the normal it recovers from wo and wi).
     let dwo = dot(wo, h);
     let dwi = dot(wi, h);
     let reflected = u_lobe <= fr.r;
