@@ -82,6 +82,20 @@ impl NetConfig {
         }
     }
 
+    /// Where a kernel-predicting U-Net averages ([`UNetConfig::kernel_linear`]); `None` for any other network.
+    pub fn kernel_linear(&self) -> Option<crate::transfer::Transfer> {
+        self.as_unet().and_then(|c| c.kernel_linear)
+    }
+
+    /// The same network with [`UNetConfig::kernel_linear`] set to `transfer` (a U-Net's; any other network as
+    /// it is). The kernel space has no weights: weights loaded from a file take the space the training asks.
+    pub fn with_kernel_linear(&self, transfer: Option<crate::transfer::Transfer>) -> NetConfig {
+        match self {
+            NetConfig::UNet(c) => c.with_kernel_linear(transfer).into(),
+            other => other.clone(),
+        }
+    }
+
     /// One line for people: `unet (width 0.25, 9 input channels)`, `unet (width 1, 9 input channels,
     /// predicting 5×5 kernels)`,
     /// `patch_mlp (17×17 patches, stride 3, hidden 127,127,127,127, tanh, σ 4.25, 12 input channels)`.
@@ -92,10 +106,11 @@ impl NetConfig {
                     format!("{} (width {}, {} input channels)", c.kind.name(), c.width, c.in_channels)
                 }
                 crate::unet::Head::Kernel { size } => format!(
-                    "{} (width {}, {} input channels, predicting {size}×{size} kernels)",
+                    "{} (width {}, {} input channels, predicting {size}×{size} kernels{})",
                     c.kind.name(),
                     c.width,
-                    c.in_channels
+                    c.in_channels,
+                    if c.kernel_linear.is_some() { " averaging in linear light" } else { "" }
                 ),
             },
             NetConfig::PatchMlp(c) => format!(

@@ -6,6 +6,7 @@ use candle_core::{DType, Device, Module, Result, Tensor, bail};
 use crate::conv::conv3x3;
 use crate::direct;
 use crate::resample::{max_pool2, upsample2, upsample2_cat};
+use crate::transfer::Transfer;
 use candle_nn::{VarBuilder, VarMap};
 use hush_hash::{SplitMix64, fnv1a};
 use serde::{Deserialize, Serialize};
@@ -201,6 +202,15 @@ pub struct UNetConfig {
     /// and write unchanged.
     #[serde(default, skip_serializing_if = "Head::is_direct")]
     pub head: Head,
+    /// Where a kernel head averages the noisy color. `None` (what files from before this field read as): in
+    /// the network's transfer space, the input's first three channels as they are. `Some(t)`, `t` the
+    /// model's transfer function: in linear light, the input's color through `t`'s inverse, averaged, and the
+    /// average through `t` again, so that the output is a weighted mean of the rendered radiance. An average
+    /// taken after a concave transfer is darker than the transfer of the average (Jensen's inequality): at a
+    /// few samples a pixel, where neighbouring values differ by much, the transfer-space average is biased
+    /// dark unless the network learns to lean on the brighter neighbours.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kernel_linear: Option<Transfer>,
 }
 
 /// The thesis' M1 capacity (§7.5.2, eq. 7.2): every width `⌊c·0.66⌋`.
@@ -212,17 +222,31 @@ pub const THESIS_M2_WIDTH: f64 = 0.33;
 impl UNetConfig {
     /// OIDN's `unet` at full width with 3 output channels.
     pub fn oidn(in_channels: usize) -> Self {
-        UNetConfig { kind: UNetKind::Unet, in_channels, out_channels: 3, width: 1.0, head: Head::Direct }
+        UNetConfig {
+            kind: UNetKind::Unet,
+            in_channels,
+            out_channels: 3,
+            width: 1.0,
+            head: Head::Direct,
+            kernel_linear: None,
+        }
     }
 
     /// A U-Net of `kind` at width multiplier `width` with 3 output channels, predicting them directly.
     pub fn new(kind: UNetKind, in_channels: usize, width: f64) -> Self {
-        UNetConfig { kind, in_channels, out_channels: 3, width, head: Head::Direct }
+        UNetConfig { kind, in_channels, out_channels: 3, width, head: Head::Direct, kernel_linear: None }
     }
 
-    /// The same network with another output head.
+    /// The same network with another output head (a direct one averages nothing: no kernel space).
     pub fn with_head(&self, head: Head) -> Self {
-        UNetConfig { head, ..self.clone() }
+        let kernel_linear = if head.is_direct() { None } else { self.kernel_linear };
+        UNetConfig { head, kernel_linear, ..self.clone() }
+    }
+
+    /// The same network with its kernels averaging in linear light through `transfer`'s inverse (`Some`) or
+    /// in the transfer space (`None`); see [`UNetConfig::kernel_linear`].
+    pub fn with_kernel_linear(&self, transfer: Option<Transfer>) -> Self {
+        UNetConfig { kernel_linear: transfer, ..self.clone() }
     }
 
     /// The thesis' M1: OIDN's `unet` with every hidden width `⌊c·0.66⌋`.
@@ -249,6 +273,9 @@ impl UNetConfig {
             bail!("UNetConfig: width must be a finite number > 0, got {}", self.width)
         }
         self.head.validate()?;
+        if self.head.is_direct() && self.kernel_linear.is_some() {
+            bail!("UNetConfig: a kernel space is set, but the network predicts colors directly (no kernels to average)")
+        }
         if !self.head.is_direct() && (self.out_channels != 3 || self.in_channels < 3) {
             bail!(
                 "UNetConfig: a kernel-predicting network filters the input's 3 color channels into 3 output \
@@ -447,11 +474,21 @@ impl UNet {
     }
 
     /// The output layer's result applied: itself for a direct network; for a kernel-predicting one, the
-    /// noisy color of `input` filtered by the kernels `y` holds as logits ([`apply_kernels`]).
+    /// noisy color of `input` filtered by the kernels `y` holds as logits ([`apply_kernels`]), in the transfer
+    /// space or in linear light ([`UNetConfig::kernel_linear`]).
     fn apply_head(&self, y: &Tensor, input: &Tensor) -> Result<Tensor> {
         match self.cfg.head {
             Head::Direct => Ok(y.clone()),
-            Head::Kernel { size } => apply_kernels(y, &input.narrow(1, 0, 3)?, size),
+            Head::Kernel { size } => {
+                let color = input.narrow(1, 0, 3)?;
+                match self.cfg.kernel_linear {
+                    None => apply_kernels(y, &color, size),
+                    Some(t) => {
+                        let linear = t.inverse_tensor(&color)?.maximum(0.0)?;
+                        t.forward_tensor(&apply_kernels(y, &linear, size)?)
+                    }
+                }
+            }
         }
     }
 }

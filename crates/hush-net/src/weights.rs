@@ -38,6 +38,15 @@ impl ModelInfo {
                 self.features.in_channels()
             )
         }
+        if let Some(t) = self.net.kernel_linear()
+            && t != self.transfer
+        {
+            bail!(
+                "the network's kernels average through the inverse of the {t:?} transfer, but the model's input is \
+                 in the {:?} transfer",
+                self.transfer
+            )
+        }
         Ok(())
     }
 }

@@ -159,7 +159,10 @@ pub fn train(
                 .adapt(&cfg.features)
                 .and_then(|w| w.with_head(cfg.net.head()))
                 .map_err(|e| TrainError::Config(e.to_string()))?;
-            if adapted.info.net != cfg.net || adapted.info.transfer != cfg.transfer {
+            // Where a kernel head averages has no weights: the configuration decides it.
+            if adapted.info.net.with_kernel_linear(cfg.net.kernel_linear()) != cfg.net
+                || adapted.info.transfer != cfg.transfer
+            {
                 return Err(TrainError::Config(format!(
                     "the initial weights are a {} with the {:?} transfer, the configuration asks for a {} with {:?}",
                     adapted.info.net.describe(),

@@ -19,6 +19,7 @@ const TRAIN_KEYS: &[&str] = &[
     "spp",
     "arch",
     "head",
+    "kernel-space",
     "width",
     "loss",
     "loss-space",

@@ -191,3 +191,46 @@ fn kernel_networks_run_frozen_and_count_their_work() -> Result<()> {
     assert_eq!(Head::parse(&Head::Kernel { size: 21 }.name()), Some(Head::Kernel { size: 21 }));
     Ok(())
 }
+
+/// Kernels averaging in linear light (`kernel_linear`): with zero logits the network's output is the transfer
+/// of the box filter of the linear color, which is brighter than the transfer space's box filter wherever
+/// the neighbourhood's values differ (Jensen's inequality for the concave PU curve), and equal to it on a
+/// constant image. The setting is written to the model file and read back; a transfer other than the
+/// model's, or a direct network with a kernel space, is refused.
+#[test]
+fn kernels_average_in_linear_light_when_asked() -> Result<()> {
+    let (source, info) = direct_model("alb,nrm", 5)?;
+    let kpn = Pretrained::read(&save_weights(&source, &info)?, &Device::Cpu)?.with_head(Head::Kernel { size: 3 })?;
+    let linear_net = kpn.info.net.with_kernel_linear(Some(Transfer::Pu));
+    let varmap = VarMap::new();
+    let net = Net::new(VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu), &linear_net)?;
+    kpn.load_into(&varmap)?;
+    let x = det_tensor(&[1, 9, 16, 16], 0.0, 1.0, 3)?;
+    let color = x.narrow(1, 0, 3)?;
+    let want = Transfer::Pu.forward_tensor(&box_filter(&Transfer::Pu.inverse_tensor(&color)?, 3)?)?;
+    let got = net.forward_padded(&x)?;
+    assert!(max_abs_diff(&got, &want)? < 1e-5, "the transfer of the linear box filter");
+    let in_transfer_space = box_filter(&color, 3)?;
+    let brighter = (&got - &in_transfer_space)?.flatten_all()?.min(0)?.to_scalar::<f32>()?;
+    assert!(brighter > -1e-6, "never darker than the transfer-space average, by Jensen: {brighter}");
+    assert!((&got - &in_transfer_space)?.mean_all()?.to_scalar::<f32>()? > 1e-3, "and brighter where values differ");
+    let constant = Tensor::ones((1, 9, 16, 16), DType::F32, &Device::Cpu)?.affine(0.4, 0.0)?;
+    assert!(max_abs_diff(&net.forward_padded(&constant)?.narrow(1, 0, 3)?, &constant.narrow(1, 0, 3)?)? < 1e-5);
+
+    let linear_info = ModelInfo { net: linear_net.clone(), ..kpn.info.clone() };
+    assert!(linear_info.net.describe().ends_with("predicting 3×3 kernels averaging in linear light)"));
+    let (back, back_info) = load_model(&save_weights(&varmap, &linear_info)?, &Device::Cpu)?;
+    assert_eq!(back_info, linear_info);
+    assert!(max_abs_diff(&back.forward_padded(&x)?, &got)? < 1e-6);
+    let json = serde_json::to_string(&linear_info.net).unwrap();
+    assert!(json.contains(r#""kernel_linear":"pu""#), "{json}");
+    assert!(!serde_json::to_string(&kpn.info.net).unwrap().contains("kernel_linear"), "unset: not written");
+
+    let err = ModelInfo { transfer: Transfer::Log, ..linear_info }.validate().unwrap_err().to_string();
+    assert!(err.contains("Pu") && err.contains("Log"), "{err}");
+    let direct = UNetConfig::new(UNetKind::Unet, 3, 1.0).with_kernel_linear(Some(Transfer::Pu));
+    assert!(direct.validate().is_err(), "a direct network averages nothing");
+    let cfg = linear_net.as_unet().unwrap();
+    assert_eq!(cfg.with_head(Head::Direct).kernel_linear, None, "a direct head drops the kernel space");
+    Ok(())
+}

@@ -90,6 +90,11 @@ pub struct TrainOptions {
     /// and the kernel layer starts at zero [default: direct, or the resumed run's].
     #[cfg_attr(feature = "clap", arg(long))]
     pub head: Option<String>,
+    /// Where a kernel head averages the noisy color: transfer (in the network's transfer space, as KPCN
+    /// averages its log-transformed input) or linear (in linear light: the transfer's inverse, the average, the
+    /// transfer again; no Jensen bias at low spp) [default: transfer, or the resumed run's].
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub kernel_space: Option<String>,
     /// Width multiplier of the network (1.0 = OIDN's widths; the thesis's M1 0.66, M2 0.33; for patch_mlp, of
     /// four hidden layers of 2047 units) [default: 0.25].
     #[cfg_attr(feature = "clap", arg(long))]
@@ -197,6 +202,7 @@ impl TrainOptions {
             spp,
             arch,
             head,
+            kernel_space,
             width,
             loss,
             loss_space,
@@ -410,6 +416,27 @@ pub fn resolve_with_init(
             _ => net,
         },
     };
+    let net = match (&net, args.kernel_space.as_deref()) {
+        (NetConfig::UNet(c), space) => {
+            let linear = match space {
+                Some("linear") => Some(d.transfer),
+                Some("transfer") => None,
+                Some(other) => bail!("unknown --kernel-space '{other}': use transfer or linear"),
+                // The resumed run's (or the starting weights'), while the network still predicts kernels.
+                None => d.net.as_unet().and_then(|b| b.kernel_linear).filter(|_| !c.head.is_direct()),
+            };
+            if linear.is_some() && c.head.is_direct() {
+                bail!(
+                    "--kernel-space linear: only a kernel-predicting network (--head kernel:K) averages the noisy color"
+                )
+            }
+            c.with_kernel_linear(linear).into()
+        }
+        (NetConfig::PatchMlp(_), Some(s)) => {
+            bail!("--kernel-space {s}: only a kernel-predicting U-Net averages the noisy color")
+        }
+        (NetConfig::PatchMlp(_), None) => net,
+    };
     let optimizer = match &args.optimizer {
         Some(o) => OptimizerConfig::parse(o)
             .with_context(|| format!("unknown --optimizer '{o}': use adam, adamw, sgd or sgd_momentum"))?,
@@ -486,7 +513,8 @@ pub fn resolve_with_init(
             .adapt(&train.features)
             .and_then(|w| w.with_head(train.net.head()))
             .with_context(|| format!("--init {}", record.source))?;
-        if adapted.info.net != train.net {
+        // Where the kernels average has no weights: the options decide it.
+        if adapted.info.net.with_kernel_linear(train.net.kernel_linear()) != train.net {
             bail!(
                 "--init {} holds a {}, but the options ask for a {}; drop --arch and --width to train the \
                  network the weights are",
@@ -578,5 +606,34 @@ mod tests {
         let mlp = TrainOptions { arch: Some("patch_mlp".into()), ..opts(Some("kernel:5"), None, false) };
         let err = format!("{:#}", resolve(&mlp, None, 8).unwrap_err());
         assert!(err.contains("only a U-Net predicts kernels"), "{err}");
+    }
+
+    /// `--kernel-space linear` makes the kernels average in linear light through the run's transfer, from
+    /// OIDN's weights too; a resumed run keeps it (under a new width too) unless told `transfer`, and loses it
+    /// with a direct head; a direct network or an unknown space is refused.
+    #[test]
+    fn the_kernel_space_option_averages_in_linear_light() {
+        use hush_net::transfer::Transfer;
+        let opts = |head: Option<&str>, space: Option<&str>, width: Option<f64>, init: bool| TrainOptions {
+            head: head.map(Into::into),
+            kernel_space: space.map(Into::into),
+            width,
+            init: init.then(|| "oidn".into()),
+            dataset: Some("ds".into()),
+            ..Default::default()
+        };
+        let space = |o: &TrainOptions, base| resolve(o, base, 8).map(|r| r.train.net.kernel_linear());
+        let linear = resolve(&opts(Some("kernel:5"), Some("linear"), None, true), None, 8).unwrap();
+        assert_eq!(linear.train.net.kernel_linear(), Some(Transfer::Pu));
+        assert_eq!(linear.train.transfer, Transfer::Pu);
+        assert_eq!(space(&opts(Some("kernel:5"), None, None, false), None).unwrap(), None, "transfer by default");
+        assert_eq!(space(&opts(None, None, None, false), Some(&linear)).unwrap(), Some(Transfer::Pu));
+        assert_eq!(space(&opts(None, None, Some(0.5), false), Some(&linear)).unwrap(), Some(Transfer::Pu));
+        assert_eq!(space(&opts(None, Some("transfer"), None, false), Some(&linear)).unwrap(), None);
+        assert_eq!(space(&opts(Some("direct"), None, None, false), Some(&linear)).unwrap(), None);
+        let err = format!("{:#}", resolve(&opts(None, Some("linear"), None, false), None, 8).unwrap_err());
+        assert!(err.contains("only a kernel-predicting network"), "{err}");
+        let err = format!("{:#}", resolve(&opts(Some("kernel:5"), Some("log"), None, false), None, 8).unwrap_err());
+        assert!(err.contains("use transfer or linear"), "{err}");
     }
 }
