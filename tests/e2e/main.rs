@@ -1011,6 +1011,32 @@ fn train_starts_from_oidn_weights() {
     assert_eq!(views, ["cbox_v000", "cbox_v001", "cbox_v002"], "the training views and the test view");
     let err = expect_error(&[&common_eval[..], &["--scenes", "attic", "--out", s(&out)]].concat());
     assert!(err.contains("--scenes attic") && err.contains("it has cbox"), "{err}");
+    // `A+B` is one method, the mean of the models' outputs: a model averaged with itself is that model, and a
+    // member that is missing is named.
+    let out = dir.join("eval-ensemble");
+    let twice = format!("{}+{}", s(&blend), s(&blend));
+    let ensemble_eval = ["eval", "--dataset", s(&ds), "--model", s(&blend), "--spp", "4", "--timing-runs", "1"];
+    expect_success(&[&ensemble_eval[..], &["--model", &twice, "--no-official", "--out", s(&out)]].concat());
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let rows = summary["rows"].as_array().unwrap();
+    let metrics = |ensemble: bool| -> Vec<(String, f64)> {
+        let mut m: Vec<(String, f64)> = rows
+            .iter()
+            .filter(|r| {
+                r["method"].as_str().unwrap().ends_with("blend")
+                    && r["method"].as_str().unwrap().contains('+') == ensemble
+            })
+            .map(|r| (r["view"].as_str().unwrap().to_string(), r["rel_mse"].as_f64().unwrap()))
+            .collect();
+        m.sort_by(|a, b| a.0.cmp(&b.0));
+        m
+    };
+    assert!(!metrics(false).is_empty());
+    assert_eq!(metrics(true), metrics(false), "the mean of a model and itself");
+    let missing_member = format!("{}+{}", s(&blend), s(&dir.join("gone.safetensors")));
+    let err = expect_error(&[&ensemble_eval[..], &["--model", &missing_member, "--out", s(&out)]].concat());
+    assert!(err.contains("gone.safetensors"), "{err}");
 
     let err = expect_error(&[
         "train",

@@ -191,7 +191,8 @@ pub struct EvalArgs {
     /// Dataset folder (from `hush dataset`); its test split is evaluated.
     #[arg(long)]
     pub dataset: PathBuf,
-    /// Trained models to evaluate (.safetensors, or OIDN's .tza weights); repeatable.
+    /// Trained models to evaluate (.safetensors, or OIDN's .tza weights); repeatable. `A+B+C` evaluates the
+    /// mean of those models' outputs as one method (an ensemble).
     #[arg(long = "model")]
     pub models: Vec<PathBuf>,
     /// Baselines to evaluate by name; repeatable or comma-separated. `noisy` (raw path tracing) is always

@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use hush_dataset::{Image, ViewImages};
 use hush_eval::guided::{GuidedParams, guided_filter};
 use hush_eval::{NOISY, Skipped, external, time_median};
@@ -105,12 +105,14 @@ impl Method for Noisy {
     }
 }
 
-/// A hush model (or OIDN weights) run by hush.
+/// A hush model (or OIDN weights) run by hush; or several, whose outputs are averaged (an ensemble: each
+/// member gets its own auxiliary images; the mean of kernel-predicting members' outputs is again a weighted
+/// average of the noisy input).
 pub struct Model {
     pub name: String,
-    pub denoiser: Denoiser,
+    pub denoisers: Vec<Denoiser>,
     /// Write back the pixels whose every sample agreed ([`super::denoiser::keep_exact`]) where the view has
-    /// the render's variance.
+    /// the render's variance (once, after the members' mean).
     pub keep_exact: bool,
 }
 
@@ -120,14 +122,30 @@ impl Method for Model {
     }
 
     fn needs_variance(&self) -> bool {
-        self.denoiser.features().contains(&hush_net::Feature::Variance)
+        self.denoisers.iter().any(|d| d.features().contains(&hush_net::Feature::Variance))
     }
 
     fn run(&self, images: &ViewImages, timing_runs: usize) -> Result<Run> {
-        let aux = self.denoiser.features().iter().map(|&f| aux_of(images, f)).collect::<Result<Vec<&Image>>>()?;
+        let auxes = self
+            .denoisers
+            .iter()
+            .map(|d| d.features().iter().map(|&f| aux_of(images, f)).collect::<Result<Vec<&Image>>>())
+            .collect::<Result<Vec<_>>>()?;
         let variance = images.variance.as_ref().filter(|_| self.keep_exact);
         let (image, seconds) = timed(timing_runs, || {
-            let mut out = self.denoiser.denoise(&images.color, &aux)?;
+            let mut out: Option<Image> = None;
+            for (denoiser, aux) in self.denoisers.iter().zip(&auxes) {
+                let y = denoiser.denoise(&images.color, aux)?;
+                match out.as_mut() {
+                    None => out = Some(y),
+                    Some(sum) => sum.data.iter_mut().zip(&y.data).for_each(|(s, v)| *s += v),
+                }
+            }
+            let mut out = out.context("a model with no members")?;
+            if self.denoisers.len() > 1 {
+                let n = self.denoisers.len() as f32;
+                out.data.iter_mut().for_each(|v| *v /= n);
+            }
             if let Some(variance) = variance {
                 keep_exact(&mut out, &images.color, variance)?;
             }
@@ -135,6 +153,38 @@ impl Method for Model {
         })?;
         Ok(Run::Done(image, Some(seconds)))
     }
+}
+
+/// Names for an ensemble's members: each file's last `k` path components without the extension, `k` the
+/// smallest from 2 that tells them apart (`lin-s0/train/model`, `lin-s1/train/model`).
+pub fn member_names(members: &[std::path::PathBuf]) -> Vec<String> {
+    let suffix = |p: &Path, k: usize| -> String {
+        let parts: Vec<String> =
+            p.with_extension("").components().map(|c| c.as_os_str().to_string_lossy().into_owned()).collect();
+        parts[parts.len().saturating_sub(k)..].join("/")
+    };
+    let deepest = members.iter().map(|m| m.components().count()).max().unwrap_or(1);
+    let mut k = 2;
+    loop {
+        let names: Vec<String> = members.iter().map(|m| suffix(m, k)).collect();
+        let mut distinct = names.clone();
+        distinct.sort();
+        distinct.dedup();
+        if distinct.len() == names.len() || k >= deepest {
+            return names;
+        }
+        k += 1;
+    }
+}
+
+/// The members of an ensemble written `a.safetensors+b.safetensors`: `None` where `path` names a file (a `+` in a
+/// file's name stays its name) or has no `+`.
+pub fn ensemble_members(path: &Path) -> Option<Vec<std::path::PathBuf>> {
+    let text = path.to_str()?;
+    if path.exists() || !text.contains('+') {
+        return None;
+    }
+    Some(text.split('+').map(std::path::PathBuf::from).collect())
 }
 
 /// Runs `denoise` once (the warm-up, whose output is kept), then `runs` more times, and returns the output
@@ -184,6 +234,9 @@ pub fn baseline(name: &str) -> Result<Option<Box<dyn Method>>> {
 
 /// A method name for a model file: `<run folder>/<file stem>`.
 pub fn method_name(path: &Path) -> String {
+    if let Some(members) = ensemble_members(path) {
+        return member_names(&members).join("+");
+    }
     let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
     match path.parent().and_then(|p| p.file_name()) {
         Some(dir) => format!("{}/{stem}", dir.to_string_lossy()),

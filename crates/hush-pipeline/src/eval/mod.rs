@@ -28,7 +28,8 @@ use pictures::pictures_of;
 pub struct EvalPlan {
     /// The dataset whose test split is evaluated.
     pub dataset: PathBuf,
-    /// Trained models (`.safetensors`, or OIDN's `.tza` weights).
+    /// Trained models (`.safetensors`, or OIDN's `.tza` weights); `a.safetensors+b.safetensors` (where no file
+    /// has that name) is one method, the mean of those models' outputs.
     pub models: Vec<PathBuf>,
     /// Baselines by name ([`BASELINES`]; `all` for every one); `noisy` is always evaluated.
     pub baselines: Vec<String>,
@@ -108,13 +109,24 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
     let mut methods: Vec<Box<dyn Method>> = vec![Box::new(Noisy)];
     let mut sets: Vec<hush_net::InputFeatures> = Vec::new();
     for path in &plan.models {
-        let (name, denoiser) = (method_name(path), Denoiser::load_on(path, &device)?);
-        let info = &denoiser.info;
-        report.notes.push(format!("Model {name}: {} on features {}.", info.net.describe(), info.features));
-        if !sets.contains(&info.features) {
-            sets.push(info.features.clone());
+        let name = method_name(path);
+        let members = methods::ensemble_members(path).unwrap_or_else(|| vec![path.clone()]);
+        let mut denoisers = Vec::new();
+        let member_names = methods::member_names(&members);
+        for (member, member_name) in members.iter().zip(&member_names) {
+            let denoiser = Denoiser::load_on(member, &device)?;
+            let info = &denoiser.info;
+            let what = format!("{} on features {}", info.net.describe(), info.features);
+            report.notes.push(match members.len() {
+                1 => format!("Model {name}: {what}."),
+                n => format!("Model {name}, the mean of {n} models' outputs: {member_name} is a {what}."),
+            });
+            if !sets.contains(&info.features) {
+                sets.push(info.features.clone());
+            }
+            denoisers.push(denoiser);
         }
-        methods.push(Box::new(Model { name, denoiser, keep_exact: plan.keep_exact }));
+        methods.push(Box::new(Model { name, denoisers, keep_exact: plan.keep_exact }));
     }
     if plan.official {
         if sets.is_empty() {
@@ -135,7 +147,7 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
             ));
             methods.push(Box::new(Model {
                 name: weights.method_name(),
-                denoiser: Denoiser::official_on(&weights, &device)?,
+                denoisers: vec![Denoiser::official_on(&weights, &device)?],
                 keep_exact: plan.keep_exact,
             }));
         }
