@@ -1011,6 +1011,31 @@ fn train_starts_from_oidn_weights() {
     assert_eq!(views, ["cbox_v000", "cbox_v001", "cbox_v002"], "the training views and the test view");
     let err = expect_error(&[&common_eval[..], &["--scenes", "attic", "--out", s(&out)]].concat());
     assert!(err.contains("--scenes attic") && err.contains("it has cbox"), "{err}");
+    // `--blend-input` mixes the render back into every network's output: the report says so, and the networks'
+    // errors move (the noisy row does not).
+    let blended = dir.join("eval-blended");
+    expect_success(&[&common_eval[..], &["--scenes", "cbox", "--blend-input", "0.05", "--out", s(&blended)]].concat());
+    let rel_mse = |dir: &Path| -> Vec<(String, String, f64)> {
+        let summary: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+        summary["rows"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|r| (r["method"].to_string(), r["view"].to_string(), r["rel_mse"].as_f64().unwrap()))
+            .collect()
+    };
+    let (plain_rows, blended_rows) = (rel_mse(&out), rel_mse(&blended));
+    assert_eq!(plain_rows.len(), blended_rows.len());
+    for (a, b) in plain_rows.iter().zip(&blended_rows) {
+        assert_eq!((&a.0, &a.1), (&b.0, &b.1));
+        if a.0.contains("noisy") || a.0.contains("reference") {
+            assert_eq!(a.2, b.2, "{a:?}");
+        }
+    }
+    assert!(plain_rows.iter().zip(&blended_rows).any(|(a, b)| a.2 != b.2), "no network's error moved");
+    let md = std::fs::read_to_string(blended.join("report.md")).unwrap();
+    assert!(md.contains("`--blend-input 0.05`"), "{md}");
     // `A+B` is one method, the mean of the models' outputs: a model averaged with itself is that model, and a
     // member that is missing is named.
     let out = dir.join("eval-ensemble");
@@ -1231,6 +1256,31 @@ fn denoise_keeps_the_pixels_whose_samples_all_agreed() {
         s(&again),
     ]);
     assert!(hush_dataset::read_rgb(&again).unwrap() == kept_img, "--variance from a file differs from the layer");
+    // --blend-input: each pixel between the network's and the render's value (a convex mix), some moved.
+    let blended = dir.join("blended.exr");
+    let stderr = expect_success(&[
+        "denoise",
+        "--color",
+        s(&render),
+        "--keep-exact",
+        "false",
+        "--blend-input",
+        "0.05",
+        "--out",
+        s(&blended),
+    ]);
+    assert!(stderr.contains("blended the input back by its standard error"), "{stderr}");
+    let blended = hush_dataset::read_rgb(&blended).unwrap();
+    let mut moved = 0;
+    for ((&b, &r), &c) in blended.data.iter().zip(&raw_img.data).zip(&color.data) {
+        let (lo, hi) = (r.min(c), r.max(c));
+        assert!(b >= lo - 1e-6 * hi.abs() && b <= hi + 1e-6 * hi.abs(), "{b} outside [{lo}, {hi}]");
+        moved += usize::from(b != r);
+    }
+    assert!(moved > 0, "no pixel moved toward the input");
+    let refused = hush(&["denoise", "--color", s(&render), "--blend-input", "0", "--out", s(&dir.join("no.exr"))]);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success() && stderr.contains("relative error is a positive number"), "{stderr}");
     // One sample per pixel: no variance estimate, nothing kept.
     expect_success(&["render", s(&scene), "--spp", "1", "--width", "32", "--height", "24", "--out", s(&render)]);
     let stderr = expect_success(&["denoise", "--color", s(&render), "--out", s(&kept)]);
@@ -1263,7 +1313,7 @@ fn an_unreadable_variance_only_skips_keeping_exact_pixels() {
     let (albedo, normal) = (aux("albedo"), aux("normal"));
     let base = ["denoise", "--color", s(&color), "--albedo", s(&albedo), "--normal", s(&normal)];
     let stderr = expect_success(&[&base[..], &["--variance", s(&variance), "--out", s(&out)]].concat());
-    assert!(stderr.contains("warning: no exact pixels kept: the variance is unusable"), "{stderr}");
+    assert!(stderr.contains("warning: no exact pixels kept, no input blended: the variance is unusable"), "{stderr}");
     expect_success(&[&base[..], &["--keep-exact", "false", "--out", s(&plain)]].concat());
     assert!(hush_dataset::read_rgb(&out).unwrap() == hush_dataset::read_rgb(&plain).unwrap());
 }

@@ -60,15 +60,7 @@ pub fn keep_exact_pixels(
     width: usize,
     height: usize,
 ) -> Result<usize> {
-    let n = width * height * 3;
-    if out.len() != n || color.len() != n || variance.len() != n {
-        candle_core::bail!(
-            "keep_exact_pixels: a {width}x{height} RGB image has {n} values; got output {}, color {}, variance {}",
-            out.len(),
-            color.len(),
-            variance.len()
-        )
-    }
+    check_sizes("keep_exact_pixels", [out.len(), color.len(), variance.len()], width, height)?;
     if !variance.iter().any(|&v| v > 0.0) {
         return Ok(0);
     }
@@ -93,4 +85,85 @@ pub fn keep_exact_pixels(
         }
     }
     Ok(kept)
+}
+
+/// Fails unless the output, color and variance (`lens`) are each `width × height × 3` values.
+fn check_sizes(what: &str, lens: [usize; 3], width: usize, height: usize) -> Result<()> {
+    let n = width * height * 3;
+    if lens.iter().any(|&l| l != n) {
+        candle_core::bail!(
+            "{what}: a {width}x{height} RGB image has {n} values; got output {}, color {}, variance {}",
+            lens[0],
+            lens[1],
+            lens[2]
+        )
+    }
+    Ok(())
+}
+
+/// Where the render is nearly converged, its own pixel is worth as much as the network's: mixes the noisy input
+/// back into the denoised `out` by each pixel's standard error. With `s²` the pixel's variance of its mean
+/// (averaged over the channels and over the `(2·radius+1)²` window around it, clipped to the image, so that a
+/// few samples that happened to agree do not pass for converged) and `L` the denoised pixel's mean value,
+/// the network is taken to err by `tau·L` (a relative error, chosen on validation scenes) and the two
+/// estimates are combined as independent ones are: the input's weight is `tau²L² / (tau²L² + s²)`, near 1
+/// where the render's relative standard error is far below `tau`, near 0 where it is far above. A pixel
+/// with `s² = 0` (every sample in its window agreed: [`keep_exact_pixels`]'s case) or a non-positive or
+/// non-finite color or output is left as the network made it.
+///
+/// Same layouts as [`keep_exact_pixels`]; where no pixel has a variance above 0 (one sample per pixel),
+/// nothing changes. Returns the mean input weight over the image.
+pub fn blend_input(
+    out: &mut [f32],
+    color: &[f32],
+    variance: &[f32],
+    width: usize,
+    height: usize,
+    tau: f32,
+    radius: usize,
+) -> Result<f32> {
+    check_sizes("blend_input", [out.len(), color.len(), variance.len()], width, height)?;
+    if !(tau.is_finite() && tau > 0.0) {
+        candle_core::bail!("blend_input: the network's relative error must be positive and finite, got {tau}")
+    }
+    if !variance.iter().any(|&v| v > 0.0) {
+        return Ok(0.0);
+    }
+    // The channel-mean variance, then its window mean by a summed-area table (f64: sums of many small terms).
+    let pixel_var: Vec<f64> = variance
+        .chunks_exact(3)
+        .map(|v| v.iter().map(|&v| if v.is_finite() { v.max(0.0) as f64 } else { 0.0 }).sum::<f64>() / 3.0)
+        .collect();
+    let mut table = vec![0.0f64; (width + 1) * (height + 1)];
+    for y in 0..height {
+        let mut row = 0.0;
+        for x in 0..width {
+            row += pixel_var[y * width + x];
+            table[(y + 1) * (width + 1) + x + 1] = table[y * (width + 1) + x + 1] + row;
+        }
+    }
+    let tau2 = (tau as f64) * (tau as f64);
+    let mut total_weight = 0.0f64;
+    for y in 0..height {
+        let (y0, y1) = (y.saturating_sub(radius), (y + radius + 1).min(height));
+        for x in 0..width {
+            let (x0, x1) = (x.saturating_sub(radius), (x + radius + 1).min(width));
+            let sum = table[y1 * (width + 1) + x1] - table[y0 * (width + 1) + x1] - table[y1 * (width + 1) + x0]
+                + table[y0 * (width + 1) + x0];
+            let s2 = sum / ((y1 - y0) * (x1 - x0)) as f64;
+            let p = (y * width + x) * 3;
+            let (c, o) = (&color[p..p + 3], &out[p..p + 3]);
+            let level = o.iter().map(|&v| v as f64).sum::<f64>() / 3.0;
+            if s2 <= 0.0 || !(level > 0.0 && level.is_finite()) || !c.iter().all(|v| v.is_finite() && *v >= 0.0) {
+                continue;
+            }
+            let a = tau2 * level * level;
+            let w = a / (a + s2);
+            for k in p..p + 3 {
+                out[k] += (w * (color[k] - out[k]) as f64) as f32;
+            }
+            total_weight += w;
+        }
+    }
+    Ok((total_weight / (width * height) as f64) as f32)
 }

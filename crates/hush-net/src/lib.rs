@@ -61,7 +61,7 @@ mod tza;
 mod unet;
 mod weights;
 
-pub use denoise::{denoise, keep_exact_pixels};
+pub use denoise::{blend_input, denoise, keep_exact_pixels};
 pub use direct::available as direct_conv_available;
 pub use input::{Feature, InputFeatures, build_inference_input, build_input, finish_color, prepare_color};
 pub use loss::{Loss, LossSpace};

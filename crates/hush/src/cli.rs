@@ -184,6 +184,12 @@ pub struct DenoiseArgs {
     /// runtime gives it.
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub keep_exact: bool,
+    /// Before --keep-exact, mix the input back in by each pixel's standard error from the color's variance
+    /// (as for --keep-exact), taking the network's relative error to be this (0.01 was chosen on validation
+    /// scenes): the input's weight is tau²L²/(tau²L² + s²), L the denoised pixel's level and s² the variance
+    /// of its mean over its 5×5 window. Off when not given.
+    #[arg(long, value_parser = parse_relative_error)]
+    pub blend_input: Option<f32>,
 }
 
 #[derive(Args, Debug)]
@@ -229,6 +235,12 @@ pub struct EvalArgs {
     /// the networks' output as OIDN's runtime gives it.
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub keep_exact: bool,
+    /// After each network (before --keep-exact), mix the noisy input back in by each pixel's standard error
+    /// from the render's variance, where the dataset stores it, taking the network's relative error to be this
+    /// (0.01 was chosen on validation scenes): the input's weight is tau²L²/(tau²L² + s²), L the denoised
+    /// pixel's level and s² the variance of its mean over its 5×5 window. Off when not given.
+    #[arg(long, value_parser = parse_relative_error)]
+    pub blend_input: Option<f32>,
 }
 
 impl EvalArgs {
@@ -245,7 +257,15 @@ impl EvalArgs {
             scenes: self.scenes,
             device: self.device,
             keep_exact: self.keep_exact,
+            blend_input: self.blend_input,
         }
+    }
+}
+
+fn parse_relative_error(s: &str) -> Result<f32, String> {
+    match s.parse::<f32>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("'{s}': the network's relative error is a positive number, for example 0.01")),
     }
 }
 

@@ -66,8 +66,9 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
             (model.denoiser_on(&device)?, model.name())
         }
     };
-    // The variance also serves --keep-exact, whatever the model takes.
-    let unused = |f: &Feature| !(model.features().contains(f) || (*f == Feature::Variance && args.keep_exact));
+    // The variance also serves --keep-exact and --blend-input, whatever the model takes.
+    let wants_variance = args.keep_exact || args.blend_input.is_some();
+    let unused = |f: &Feature| !(model.features().contains(f) || (*f == Feature::Variance && wants_variance));
     for f in Feature::ALL.into_iter().filter(|f| given(*f).is_some() && unused(f)) {
         eprintln!("warning: --{} is ignored: model {} takes {}", f.long_name(), model_name, model.info.features);
     }
@@ -96,8 +97,9 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
             eprintln!("warning: the {name} input holds {bad} NaN/Inf values; they are treated as 0");
         }
     }
-    // The variance for keeping exact pixels: the model's own input where it takes one, else --variance or
-    // the EXR's layer, where a variance that cannot be used is a warning (it serves only that step).
+    // The variance for keeping exact pixels and blending the input back: the model's own input where it takes
+    // one, else --variance or the EXR's layer, where a variance that cannot be used is a warning (it serves
+    // only those steps).
     let matches_color = |v: Image| -> Result<Image> {
         let (w, h, c) = (v.width, v.height, v.channels);
         if (w, h, c) != (color.width, color.height, 3) {
@@ -106,7 +108,7 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
         Ok(v)
     };
     let variance = match model.features().iter().position(|&f| f == Feature::Variance) {
-        _ if !args.keep_exact => None,
+        _ if !wants_variance => None,
         Some(i) => Some(aux[i].clone()),
         None => {
             let read = match (&args.variance, layer(Feature::Variance)) {
@@ -119,7 +121,7 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
             match read.map(|r| r.and_then(matches_color)) {
                 Some(Ok(v)) => Some(v),
                 Some(Err(e)) => {
-                    eprintln!("warning: no exact pixels kept: the variance is unusable: {e:#}");
+                    eprintln!("warning: no exact pixels kept, no input blended: the variance is unusable: {e:#}");
                     None
                 }
                 None => None,
@@ -129,7 +131,11 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
     let refs: Vec<&Image> = aux.iter().collect();
     let start = std::time::Instant::now();
     let mut out = model.denoise(&color, &refs)?;
-    let kept = match &variance {
+    if let (Some(tau), Some(v)) = (args.blend_input, &variance) {
+        let weight = hush_pipeline::blend_input(&mut out, &color, v, tau)?;
+        eprintln!("blended the input back by its standard error: its mean weight {weight:.4}");
+    }
+    let kept = match variance.as_ref().filter(|_| args.keep_exact) {
         Some(v) => Some(hush_pipeline::keep_exact(&mut out, &color, v)?),
         None => None,
     };

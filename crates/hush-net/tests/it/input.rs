@@ -146,3 +146,68 @@ fn keep_exact_pixels_writes_back_the_interior_of_exact_regions() {
     let err = keep_exact_pixels(&mut out, &color, &variance[3..], w, h).unwrap_err().to_string();
     assert!(err.contains("6x5"), "{err}");
 }
+
+/// Blending the input back: where the pixel's window has variance s² and the denoised level is L, the input's
+/// weight is τ²L²/(τ²L² + s²) (one half where s = τL); the window averages the variance (a lone noisy pixel
+/// gives its neighbours a 25th of its own over a whole 5×5 window); s² = 0, a black output or a non-finite
+/// color leave the network's pixel; no variance anywhere (one sample per pixel) changes nothing; a size
+/// mismatch or a τ ≤ 0 is an error.
+#[test]
+fn blend_input_weighs_the_input_by_its_standard_error() {
+    use hush_net::blend_input;
+    let (w, h) = (9usize, 7usize);
+    let (tau, level) = (0.1f32, 2.0f32);
+    let s2 = (tau * level).powi(2); // weight one half
+    let color = vec![1.0f32; w * h * 3];
+    let mut variance = vec![s2; w * h * 3];
+    let mut out = vec![level; w * h * 3];
+    let mean = blend_input(&mut out, &color, &variance, w, h, tau, 2).unwrap();
+    assert!((mean - 0.5).abs() < 1e-6, "{mean}");
+    assert!(out.iter().all(|&v| (v - 1.5).abs() < 1e-6), "half way between 2 and 1");
+
+    // A lone pixel of variance 25·s² at (4, 3) in a zero field: a pixel whose window (5×5, clipped to the 9×7
+    // image) of n pixels holds it has 25·s²/n as its window's mean, so the input's weight 1/(1 + 25/n): one half
+    // where the window is whole (x in 2..=6, y in 2..=4); the rest have s² = 0 and are left.
+    variance.iter_mut().for_each(|v| *v = 0.0);
+    let c = (3 * w + 4) * 3;
+    variance[c..c + 3].copy_from_slice(&[25.0 * s2; 3]);
+    let mut out = vec![level; w * h * 3];
+    blend_input(&mut out, &color, &variance, w, h, tau, 2).unwrap();
+    for y in 0..h {
+        for x in 0..w {
+            let p = (y * w + x) * 3;
+            let span = |i: usize, len: usize| (i + 3).min(len) - i.saturating_sub(2);
+            let n = (span(x, w) * span(y, h)) as f32;
+            let want = if x.abs_diff(4) <= 2 && y.abs_diff(3) <= 2 {
+                let weight = 1.0 / (1.0 + 25.0 / n);
+                level + weight * (1.0 - level)
+            } else {
+                level
+            };
+            assert!((out[p] - want).abs() < 1e-6, "pixel ({x}, {y}): {} against {want}", out[p]);
+            if (2..=6).contains(&x) && (2..=4).contains(&y) {
+                assert!((out[p] - 1.5).abs() < 1e-6, "a whole window: weight one half");
+            }
+        }
+    }
+
+    // A black output, a NaN color: left as the network made them.
+    let mut variance = vec![s2; w * h * 3];
+    let mut color = vec![1.0f32; w * h * 3];
+    color[3] = f32::NAN;
+    let mut out = vec![level; w * h * 3];
+    out[6..9].copy_from_slice(&[0.0; 3]);
+    blend_input(&mut out, &color, &variance, w, h, tau, 2).unwrap();
+    assert_eq!(&out[3..9], &[level, level, level, 0.0, 0.0, 0.0]);
+    assert!((out[9] - 1.5).abs() < 1e-6);
+
+    // One sample per pixel: nothing changes.
+    let mut untouched = vec![level; w * h * 3];
+    assert_eq!(blend_input(&mut untouched, &color, &vec![0.0; w * h * 3], w, h, tau, 2).unwrap(), 0.0);
+    assert!(untouched.iter().all(|&v| v == level));
+    variance.truncate(3);
+    let err = blend_input(&mut out, &color, &variance, w, h, tau, 2).unwrap_err().to_string();
+    assert!(err.contains("9x7"), "{err}");
+    let err = blend_input(&mut out, &color, &vec![s2; w * h * 3], w, h, 0.0, 2).unwrap_err().to_string();
+    assert!(err.contains("positive"), "{err}");
+}

@@ -26,10 +26,26 @@ pub fn aux_of(view: &hush_dataset::ViewImages, f: Feature) -> Result<&Image> {
 /// variance 0 and a positive color over the pixel's 3×3 neighbourhood); returns how many. `variance` is the
 /// render's per-pixel variance of its mean (`hush render`'s `variance` layer).
 pub fn keep_exact(out: &mut Image, color: &Image, variance: &Image) -> Result<usize> {
+    check_sizes(out, color, variance, "keeping exact pixels")?;
+    Ok(hush_net::keep_exact_pixels(&mut out.data, &color.data, &variance.data, out.width, out.height)?)
+}
+
+/// Mixes the noisy `color` back into the denoised `out` by each pixel's standard error
+/// ([`hush_net::blend_input`], over a 5×5 window) with `tau` the network's relative error; returns the mean
+/// weight of the input. `variance` as for [`keep_exact`].
+pub fn blend_input(out: &mut Image, color: &Image, variance: &Image, tau: f32) -> Result<f32> {
+    check_sizes(out, color, variance, "blending the input back")?;
+    Ok(hush_net::blend_input(&mut out.data, &color.data, &variance.data, out.width, out.height, tau, BLEND_RADIUS)?)
+}
+
+/// The window of [`blend_input`]'s variance: 5×5.
+pub const BLEND_RADIUS: usize = 2;
+
+fn check_sizes(out: &Image, color: &Image, variance: &Image, doing: &str) -> Result<()> {
     for (what, image) in [("color", color), ("variance", variance)] {
         if (image.width, image.height, image.channels) != (out.width, out.height, 3) {
             bail!(
-                "keeping exact pixels: the {what} image is {}×{}×{} but the denoised image is {}×{}×3",
+                "{doing}: the {what} image is {}×{}×{} but the denoised image is {}×{}×3",
                 image.width,
                 image.height,
                 image.channels,
@@ -38,7 +54,7 @@ pub fn keep_exact(out: &mut Image, color: &Image, variance: &Image) -> Result<us
             );
         }
     }
-    Ok(hush_net::keep_exact_pixels(&mut out.data, &color.data, &variance.data, out.width, out.height)?)
+    Ok(())
 }
 
 /// A trained model (a hush model or OIDN weights) and what it expects.

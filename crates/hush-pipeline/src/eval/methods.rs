@@ -8,7 +8,7 @@ use hush_dataset::{Image, ViewImages};
 use hush_eval::guided::{GuidedParams, guided_filter};
 use hush_eval::{NOISY, Skipped, external, time_median};
 
-use super::denoiser::{Denoiser, aux_of, keep_exact};
+use super::denoiser::{Denoiser, aux_of, blend_input, keep_exact};
 
 /// What produced one test image, and how.
 pub trait Method {
@@ -114,6 +114,10 @@ pub struct Model {
     /// Write back the pixels whose every sample agreed ([`super::denoiser::keep_exact`]) where the view has
     /// the render's variance (once, after the members' mean).
     pub keep_exact: bool,
+    /// Mix the noisy input back in by each pixel's standard error, with this relative error of the network
+    /// ([`hush_net::blend_input`]), where the view has the render's variance (after the members' mean, before
+    /// keeping exact pixels).
+    pub blend_input: Option<f32>,
 }
 
 impl Method for Model {
@@ -131,7 +135,7 @@ impl Method for Model {
             .iter()
             .map(|d| d.features().iter().map(|&f| aux_of(images, f)).collect::<Result<Vec<&Image>>>())
             .collect::<Result<Vec<_>>>()?;
-        let variance = images.variance.as_ref().filter(|_| self.keep_exact);
+        let variance = images.variance.as_ref();
         let (image, seconds) = timed(timing_runs, || {
             let mut out: Option<Image> = None;
             for (denoiser, aux) in self.denoisers.iter().zip(&auxes) {
@@ -142,11 +146,12 @@ impl Method for Model {
                 }
             }
             let mut out = out.context("a model with no members")?;
-            if self.denoisers.len() > 1 {
-                let n = self.denoisers.len() as f32;
-                out.data.iter_mut().for_each(|v| *v /= n);
+            let n = self.denoisers.len() as f32;
+            out.data.iter_mut().for_each(|v| *v /= n);
+            if let (Some(tau), Some(variance)) = (self.blend_input, variance) {
+                blend_input(&mut out, &images.color, variance, tau)?;
             }
-            if let Some(variance) = variance {
+            if let Some(variance) = variance.filter(|_| self.keep_exact) {
                 keep_exact(&mut out, &images.color, variance)?;
             }
             Ok(out)
@@ -155,26 +160,14 @@ impl Method for Model {
     }
 }
 
-/// Names for an ensemble's members: each file's last `k` path components without the extension, `k` the
-/// smallest from 2 that tells them apart (`lin-s0/train/model`, `lin-s1/train/model`).
+/// Names for an ensemble's members: [`method_name`]s where they tell the members apart, else the paths as
+/// given (without the extension).
 pub fn member_names(members: &[std::path::PathBuf]) -> Vec<String> {
-    let suffix = |p: &Path, k: usize| -> String {
-        let parts: Vec<String> =
-            p.with_extension("").components().map(|c| c.as_os_str().to_string_lossy().into_owned()).collect();
-        parts[parts.len().saturating_sub(k)..].join("/")
-    };
-    let deepest = members.iter().map(|m| m.components().count()).max().unwrap_or(1);
-    let mut k = 2;
-    loop {
-        let names: Vec<String> = members.iter().map(|m| suffix(m, k)).collect();
-        let mut distinct = names.clone();
-        distinct.sort();
-        distinct.dedup();
-        if distinct.len() == names.len() || k >= deepest {
-            return names;
-        }
-        k += 1;
+    let short: Vec<String> = members.iter().map(|m| method_name(m)).collect();
+    if short.iter().collect::<std::collections::HashSet<_>>().len() == short.len() {
+        return short;
     }
+    members.iter().map(|m| m.with_extension("").display().to_string()).collect()
 }
 
 /// The members of an ensemble written `a.safetensors+b.safetensors`: `None` where `path` names a file (a `+` in a

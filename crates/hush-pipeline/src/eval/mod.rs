@@ -15,7 +15,7 @@ use hush_dataset::{AuxSource, Image, Manifest, Split, load_view_with, write_png_
 use hush_eval::viewer::file_safe;
 use hush_eval::{REFERENCE, Report, Row, Viewer, compare, exposure_of};
 
-pub use denoiser::{Denoiser, aux_of, keep_exact};
+pub use denoiser::{Denoiser, aux_of, blend_input, keep_exact};
 pub use methods::{BASELINES, Method, Model, Run, baseline, method_name};
 
 use crate::Observer;
@@ -55,6 +55,10 @@ pub struct EvalPlan {
     /// OIDN's own runtime), write back the pixels whose every sample agreed ([`hush_net::keep_exact_pixels`]),
     /// where the dataset stores the render's variance (a variance file that cannot be read is noted and skipped).
     pub keep_exact: bool,
+    /// After every network hush runs (as `keep_exact`, and before it), mix the noisy input back in by each
+    /// pixel's standard error ([`hush_net::blend_input`]) with this relative error of the network, where the
+    /// dataset stores the render's variance. `None`: the networks' output as it is.
+    pub blend_input: Option<f32>,
 }
 
 impl EvalPlan {
@@ -74,6 +78,7 @@ impl EvalPlan {
             scenes: Vec::new(),
             device: None,
             keep_exact: true,
+            blend_input: None,
         }
     }
 }
@@ -126,7 +131,7 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
             }
             denoisers.push(denoiser);
         }
-        methods.push(Box::new(Model { name, denoisers, keep_exact: plan.keep_exact }));
+        methods.push(Box::new(Model { name, denoisers, keep_exact: plan.keep_exact, blend_input: plan.blend_input }));
     }
     if plan.official {
         if sets.is_empty() {
@@ -149,6 +154,7 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
                 name: weights.method_name(),
                 denoisers: vec![Denoiser::official_on(&weights, &device)?],
                 keep_exact: plan.keep_exact,
+                blend_input: plan.blend_input,
             }));
         }
     }
@@ -198,6 +204,7 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
 
     // A model that takes the variance needs it; keeping exact pixels only uses it where it reads.
     let variance_needed = methods.iter().any(|m| m.needs_variance());
+    let variance_wanted = plan.keep_exact || plan.blend_input.is_some();
     let mut unreadable_variance = Vec::new();
     if plan.keep_exact {
         report.notes.push(
@@ -209,6 +216,14 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
                 .into(),
         );
     }
+    if let Some(tau) = plan.blend_input {
+        report.notes.push(format!(
+            "After each network hush runs, before keeping exact pixels, the noisy input is mixed back in by each \
+             pixel's standard error (`--blend-input {tau}`): its weight is τ²L²/(τ²L² + s²), with τ = {tau} the \
+             network's assumed relative error, L the denoised pixel's level and s² the render's variance of the \
+             pixel's mean averaged over its 5×5 window, where the dataset stores the render's variance."
+        ));
+    }
     for view in &views {
         let name = format!("{}_{}", view.scene, view.view);
         let spps: Vec<u32> =
@@ -218,8 +233,8 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
         };
         let mut reference_row = true;
         for spp in spps {
-            let images = match load_view_with(&plan.dataset, view, spp, plan.aux, variance_needed || plan.keep_exact) {
-                Err(e) if plan.keep_exact && !variance_needed => {
+            let images = match load_view_with(&plan.dataset, view, spp, plan.aux, variance_needed || variance_wanted) {
+                Err(e) if variance_wanted && !variance_needed => {
                     unreadable_variance.push(format!("{name} at {spp} spp ({e})"));
                     load_view_with(&plan.dataset, view, spp, plan.aux, false)?
                 }
