@@ -1011,31 +1011,37 @@ fn train_starts_from_oidn_weights() {
     assert_eq!(views, ["cbox_v000", "cbox_v001", "cbox_v002"], "the training views and the test view");
     let err = expect_error(&[&common_eval[..], &["--scenes", "attic", "--out", s(&out)]].concat());
     assert!(err.contains("--scenes attic") && err.contains("it has cbox"), "{err}");
-    // `--blend-input` mixes the render back into every network's output: the report says so, and the networks'
-    // errors move (the noisy row does not).
-    let blended = dir.join("eval-blended");
-    expect_success(&[&common_eval[..], &["--scenes", "cbox", "--blend-input", "0.05", "--out", s(&blended)]].concat());
-    let rel_mse = |dir: &Path| -> Vec<(String, String, f64)> {
-        let summary: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
-        summary["rows"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|r| (r["method"].to_string(), r["view"].to_string(), r["rel_mse"].as_f64().unwrap()))
-            .collect()
-    };
-    let (plain_rows, blended_rows) = (rel_mse(&out), rel_mse(&blended));
-    assert_eq!(plain_rows.len(), blended_rows.len());
-    for (a, b) in plain_rows.iter().zip(&blended_rows) {
-        assert_eq!((&a.0, &a.1), (&b.0, &b.1));
-        if a.0.contains("noisy") || a.0.contains("reference") {
-            assert_eq!(a.2, b.2, "{a:?}");
+    // `--blend-input` mixes the render back into every network's output, and `--poses 2 --restore-low-band 2`
+    // averages two poses and restores the render's low band where they disagree: the report says so, and the
+    // networks' errors move (the noisy row does not).
+    for (options, note) in [
+        (&["--blend-input", "0.05"][..], "`--blend-input 0.05`"),
+        (&["--poses", "2", "--restore-low-band", "2"][..], "`--restore-low-band 2`"),
+    ] {
+        let blended = dir.join(format!("eval-{}", options[0].trim_start_matches('-')));
+        expect_success(&[&common_eval[..], &["--scenes", "cbox", "--out", s(&blended)], options].concat());
+        let rel_mse = |dir: &Path| -> Vec<(String, String, f64)> {
+            let summary: serde_json::Value =
+                serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+            summary["rows"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|r| (r["method"].to_string(), r["view"].to_string(), r["rel_mse"].as_f64().unwrap()))
+                .collect()
+        };
+        let (plain_rows, blended_rows) = (rel_mse(&out), rel_mse(&blended));
+        assert_eq!(plain_rows.len(), blended_rows.len());
+        for (a, b) in plain_rows.iter().zip(&blended_rows) {
+            assert_eq!((&a.0, &a.1), (&b.0, &b.1));
+            if a.0.contains("noisy") || a.0.contains("reference") {
+                assert_eq!(a.2, b.2, "{a:?}");
+            }
         }
+        assert!(plain_rows.iter().zip(&blended_rows).any(|(a, b)| a.2 != b.2), "no network's error moved");
+        let md = std::fs::read_to_string(blended.join("report.md")).unwrap();
+        assert!(md.contains(note), "{md}");
     }
-    assert!(plain_rows.iter().zip(&blended_rows).any(|(a, b)| a.2 != b.2), "no network's error moved");
-    let md = std::fs::read_to_string(blended.join("report.md")).unwrap();
-    assert!(md.contains("`--blend-input 0.05`"), "{md}");
     // `A+B` is one method, the mean of the models' outputs: a model averaged with itself is that model, and a
     // member that is missing is named.
     let out = dir.join("eval-ensemble");
@@ -1281,6 +1287,31 @@ fn denoise_keeps_the_pixels_whose_samples_all_agreed() {
     let refused = hush(&["denoise", "--color", s(&render), "--blend-input", "0", "--out", s(&dir.join("no.exr"))]);
     let stderr = String::from_utf8_lossy(&refused.stderr);
     assert!(!refused.status.success() && stderr.contains("relative error is a positive number"), "{stderr}");
+    // --poses: the mean over the square's symmetries, close to the network's single pose but not it;
+    // --restore-low-band moves it toward the render where the poses disagree; bad values are refused.
+    let (posed, restored) = (dir.join("posed.exr"), dir.join("restored.exr"));
+    let denoise_with = |extra: &[&str], out: &std::path::Path| {
+        expect_success(
+            &[&["denoise", "--color", s(&render), "--keep-exact", "false"][..], extra, &["--out", s(out)]].concat(),
+        )
+    };
+    denoise_with(&["--poses", "8"], &posed);
+    let stderr = denoise_with(&["--poses", "8", "--restore-low-band", "2"], &restored);
+    assert!(stderr.contains("restored the input's low band where the 8 poses disagree"), "{stderr}");
+    let (posed, restored) = (hush_dataset::read_rgb(&posed).unwrap(), hush_dataset::read_rgb(&restored).unwrap());
+    let rms = |a: &[f32], b: &[f32]| {
+        (a.iter().zip(b).map(|(x, y)| f64::from(x - y).powi(2)).sum::<f64>() / a.len() as f64).sqrt()
+    };
+    let level = (raw_img.data.iter().map(|v| f64::from(*v).powi(2)).sum::<f64>() / raw_img.data.len() as f64).sqrt();
+    let apart = rms(&posed.data, &raw_img.data);
+    assert!(apart > 0.0 && apart < 0.1 * level, "the poses' mean is {apart} from one pose (level {level})");
+    assert!(restored.data != posed.data, "nothing restored");
+    assert!(rms(&restored.data, &color.data) < rms(&posed.data, &color.data), "restoring moved away from the input");
+    for bad in [["--poses", "9"], ["--restore-low-band", "0"]] {
+        let refused =
+            hush(&[&["denoise", "--color", s(&render)][..], &bad, &["--out", s(&dir.join("no.exr"))]].concat());
+        assert!(!refused.status.success(), "{bad:?} accepted");
+    }
     // One sample per pixel: no variance estimate, nothing kept.
     expect_success(&["render", s(&scene), "--spp", "1", "--width", "32", "--height", "24", "--out", s(&render)]);
     let stderr = expect_success(&["denoise", "--color", s(&render), "--out", s(&kept)]);

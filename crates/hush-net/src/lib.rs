@@ -50,6 +50,7 @@
 mod conv;
 mod denoise;
 mod direct;
+pub mod ensemble;
 mod input;
 pub mod loss;
 mod net;

@@ -145,6 +145,9 @@ const HABLE_F: f64 = 0.30; // toe denominator
 const FILMIC_WHITE: f64 = 11.2; // linear white point: maps to 1
 const FILMIC_SCALE: f64 = 1.758141; // "exposure bias to match 18% middle gray"
 
+/// The exposed linear value that [`display`] shows as white (1): brighter values all look the same.
+pub const DISPLAY_WHITE: f32 = (FILMIC_WHITE / FILMIC_SCALE) as f32;
+
 fn hable(x: f64) -> f64 {
     ((x * (HABLE_A * x + HABLE_C * HABLE_B) + HABLE_D * HABLE_E) / (x * (HABLE_A * x + HABLE_B) + HABLE_D * HABLE_F))
         - HABLE_E / HABLE_F

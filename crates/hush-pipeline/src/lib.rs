@@ -70,7 +70,7 @@ pub fn read_weight_file(path: &std::path::Path) -> std::io::Result<Vec<u8>> {
     hush_io::read_limited(path, max_weight_bytes(), "weight file")
 }
 pub use device::{device, is_known as is_known_device};
-pub use eval::{Denoiser, EvalPlan, blend_input, keep_exact};
+pub use eval::{Denoiser, EvalPlan, blend_input, combine, keep_exact};
 pub use observer::{Notes, Observer, Quiet, RenderProgress};
 pub use probe::{MAX_ATTEMPTS, MIN_LIT_FRACTION, PROBE_SIZE, PROBE_SPP, lit_fraction, probe_size};
 pub use scene::{RenderStats, ViewOverrides, load_scene};

@@ -190,6 +190,15 @@ pub struct DenoiseArgs {
     /// of its mean over its 5×5 window. Off when not given.
     #[arg(long, value_parser = parse_relative_error)]
     pub blend_input: Option<f32>,
+    /// Denoise in this many poses of the square's symmetries and average them: 1 the network as it is, 2 also
+    /// flipped left to right, 4 the flips in x, y and both, 8 those and their transposes (8 times the time).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=8))]
+    pub poses: u8,
+    /// With several poses (or models), put back the input's low band (a Gaussian of this std in pixels; 2 was
+    /// chosen on validation scenes) where the outputs disagree, weighted by their spread against the band's
+    /// noise from the render's variance (as for --keep-exact). Off when not given.
+    #[arg(long, value_parser = parse_sigma)]
+    pub restore_low_band: Option<f32>,
 }
 
 #[derive(Args, Debug)]
@@ -241,6 +250,15 @@ pub struct EvalArgs {
     /// pixel's level and s² the variance of its mean over its 5×5 window. Off when not given.
     #[arg(long, value_parser = parse_relative_error)]
     pub blend_input: Option<f32>,
+    /// Denoise in this many poses of the square's symmetries and average them: 1 the network as it is, 2 also
+    /// flipped left to right, 4 the flips in x, y and both, 8 those and their transposes (8 times the time).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=8))]
+    pub poses: u8,
+    /// With several poses (or models), put back the input's low band (a Gaussian of this std in pixels; 2 was
+    /// chosen on validation scenes) where the outputs disagree, weighted by their spread against the band's
+    /// noise from the render's variance (as for --keep-exact). Off when not given.
+    #[arg(long, value_parser = parse_sigma)]
+    pub restore_low_band: Option<f32>,
 }
 
 impl EvalArgs {
@@ -258,7 +276,17 @@ impl EvalArgs {
             device: self.device,
             keep_exact: self.keep_exact,
             blend_input: self.blend_input,
+            poses: usize::from(self.poses),
+            restore_low_band: self.restore_low_band,
         }
+    }
+}
+
+fn parse_sigma(s: &str) -> Result<f32, String> {
+    match s.parse::<f32>() {
+        Ok(v) if v.is_finite() && v > 0.0 && v <= 64.0 => Ok(v),
+        Ok(v) => Err(format!("a Gaussian's std in pixels above 0 and at most 64, got {v}")),
+        Err(e) => Err(format!("{e}: a Gaussian's std in pixels, e.g. 2")),
     }
 }
 

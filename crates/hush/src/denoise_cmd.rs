@@ -67,7 +67,7 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
         }
     };
     // The variance also serves --keep-exact and --blend-input, whatever the model takes.
-    let wants_variance = args.keep_exact || args.blend_input.is_some();
+    let wants_variance = args.keep_exact || args.blend_input.is_some() || args.restore_low_band.is_some();
     let unused = |f: &Feature| !(model.features().contains(f) || (*f == Feature::Variance && wants_variance));
     for f in Feature::ALL.into_iter().filter(|f| given(*f).is_some() && unused(f)) {
         eprintln!("warning: --{} is ignored: model {} takes {}", f.long_name(), model_name, model.info.features);
@@ -130,7 +130,11 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
     };
     let refs: Vec<&Image> = aux.iter().collect();
     let start = std::time::Instant::now();
-    let mut out = model.denoise(&color, &refs)?;
+    let outputs = model.denoise_poses(&color, &refs, usize::from(args.poses))?;
+    let (mut out, restored) = hush_pipeline::combine(&outputs, &color, variance.as_ref(), args.restore_low_band)?;
+    if let Some(weight) = restored {
+        eprintln!("restored the input's low band where the {} poses disagree: its mean weight {weight:.4}", args.poses);
+    }
     if let (Some(tau), Some(v)) = (args.blend_input, &variance) {
         let weight = hush_pipeline::blend_input(&mut out, &color, v, tau)?;
         eprintln!("blended the input back by its standard error: its mean weight {weight:.4}");

@@ -211,3 +211,73 @@ fn blend_input_weighs_the_input_by_its_standard_error() {
     let err = blend_input(&mut out, &color, &vec![s2; w * h * 3], w, h, 0.0, 2).unwrap_err().to_string();
     assert!(err.contains("positive"), "{err}");
 }
+
+/// The square's 8 symmetries: each pose undone gives the image back (a non-square image, so the transpose
+/// swaps the sides); pose 1 flips x, pose 2 flips y, pose 4 transposes; the 8 poses of an asymmetric image are
+/// 8 different images.
+#[test]
+fn poses_are_the_eight_symmetries_and_undo() {
+    use hush_net::ensemble::{POSES, pose, unpose};
+    let (w, h, c) = (5usize, 3usize, 2usize);
+    let image: Vec<f32> = (0..w * h * c).map(|i| i as f32).collect();
+    let at = |x: usize, y: usize| &image[(y * w + x) * c..][..c];
+    let mut seen = Vec::new();
+    for k in 0..POSES {
+        let (posed, pw, ph) = pose(&image, w, h, c, k);
+        assert_eq!((pw, ph), if k & 4 != 0 { (h, w) } else { (w, h) }, "pose {k}");
+        assert_eq!(unpose(&posed, pw, ph, c, k), image, "pose {k} undone");
+        assert!(!seen.contains(&posed), "pose {k} repeats another");
+        seen.push(posed);
+    }
+    let (flip_x, ..) = pose(&image, w, h, c, 1);
+    assert_eq!(&flip_x[..c], at(w - 1, 0));
+    let (flip_y, ..) = pose(&image, w, h, c, 2);
+    assert_eq!(&flip_y[..c], at(0, h - 1));
+    let (transposed, tw, _) = pose(&image, w, h, c, 4);
+    // Pixel (x, y) of the transpose is (y, x) of the image: (2, 1) there is (1, 2) here.
+    assert_eq!(&transposed[(tw + 2) * c..][..c], at(1, 2));
+}
+
+/// Restoring the input's low band where estimates disagree: estimates that agree change nothing (weight 0);
+/// on a constant image, estimates that differ by ±d from their mean m, against an input at level a whose
+/// variance gives its low band s², move every pixel to m + e²/(e² + s²)·(a − m) with e² their sample
+/// variance (the Gaussian keeps constants, and s² = v·(Σ g²)² for a constant variance v); no variance anywhere
+/// changes nothing; one estimate, a σ ≤ 0 or a size mismatch are errors.
+#[test]
+fn restore_low_band_weighs_the_spread_against_the_inputs_noise() {
+    use hush_net::ensemble::restore_low_band;
+    let (w, h) = (12usize, 9usize);
+    let n = w * h * 3;
+    let (a, m, d) = (0.5f32, 0.3f32, 0.02f32);
+    let color = vec![a; n];
+    let sigma = 1.0f32;
+    // Σ g² of the normalized 7-tap Gaussian of std 1 (radius 3), squared for the 2-D kernel.
+    let g: Vec<f32> = (-3i32..=3).map(|x| (-(x * x) as f32 / 2.0).exp()).collect();
+    let sum: f32 = g.iter().sum();
+    let g2: f32 = g.iter().map(|v| (v / sum) * (v / sum)).sum::<f32>();
+    let e2 = 2.0 * d * d; // two estimates m ± d: sample variance (2·d²)/(2 − 1)
+    let v = e2 / (g2 * g2); // the input's low band as uncertain as the spread: weight one half
+    let variance = vec![v; n];
+
+    let same = vec![m; n];
+    let mut out = same.clone();
+    let weight = restore_low_band(&mut out, &[&same, &same], &color, &variance, w, h, sigma).unwrap();
+    assert_eq!(weight, 0.0);
+    assert!(out.iter().all(|&o| o == m));
+
+    let (lo, hi) = (vec![m - d; n], vec![m + d; n]);
+    let mut out = vec![m; n];
+    let weight = restore_low_band(&mut out, &[&lo, &hi], &color, &variance, w, h, sigma).unwrap();
+    assert!((weight - 0.5).abs() < 1e-4, "{weight}");
+    assert!(out.iter().all(|&o| (o - (m + 0.5 * (a - m))).abs() < 1e-4), "{:?}", &out[..3]);
+
+    let mut untouched = vec![m; n];
+    assert_eq!(restore_low_band(&mut untouched, &[&lo, &hi], &color, &vec![0.0; n], w, h, sigma).unwrap(), 0.0);
+    assert!(untouched.iter().all(|&o| o == m));
+    let err = restore_low_band(&mut out, &[&lo], &color, &variance, w, h, sigma).unwrap_err().to_string();
+    assert!(err.contains("at least 2"), "{err}");
+    let err = restore_low_band(&mut out, &[&lo, &hi], &color, &variance, w, h, 0.0).unwrap_err().to_string();
+    assert!(err.contains("sigma"), "{err}");
+    let err = restore_low_band(&mut out, &[&lo, &hi[..3]], &color, &variance, w, h, sigma).unwrap_err().to_string();
+    assert!(err.contains("12x9"), "{err}");
+}

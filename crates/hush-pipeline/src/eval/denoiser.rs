@@ -38,6 +38,44 @@ pub fn blend_input(out: &mut Image, color: &Image, variance: &Image, tau: f32) -
     Ok(hush_net::blend_input(&mut out.data, &color.data, &variance.data, out.width, out.height, tau, BLEND_RADIUS)?)
 }
 
+/// The mean of several estimates of one image (a model's poses, an ensemble's members), then, with
+/// `restore = Some(sigma)` and the render's `variance`, the input's low band put back where they disagree
+/// ([`hush_net::ensemble::restore_low_band`]); returns the image and that step's mean weight.
+pub fn combine(
+    outputs: &[Image],
+    color: &Image,
+    variance: Option<&Image>,
+    restore: Option<f32>,
+) -> Result<(Image, Option<f32>)> {
+    let first = outputs.first().context("no estimates to combine")?;
+    let mut out = first.clone();
+    for o in &outputs[1..] {
+        if (o.width, o.height, o.channels) != (out.width, out.height, out.channels) {
+            bail!("estimates of different sizes: {}×{} and {}×{}", out.width, out.height, o.width, o.height);
+        }
+        out.data.iter_mut().zip(&o.data).for_each(|(s, v)| *s += v);
+    }
+    let n = outputs.len() as f32;
+    out.data.iter_mut().for_each(|v| *v /= n);
+    let weight = match (restore, variance) {
+        (Some(sigma), Some(variance)) if outputs.len() > 1 => {
+            check_sizes(&out, color, variance, "restoring the input's low band")?;
+            let refs: Vec<&[f32]> = outputs.iter().map(|o| o.data.as_slice()).collect();
+            Some(hush_net::ensemble::restore_low_band(
+                &mut out.data,
+                &refs,
+                &color.data,
+                &variance.data,
+                out.width,
+                out.height,
+                sigma,
+            )?)
+        }
+        _ => None,
+    };
+    Ok((out, weight))
+}
+
 /// The window of [`blend_input`]'s variance: 5×5.
 pub const BLEND_RADIUS: usize = 2;
 
@@ -116,6 +154,34 @@ impl Denoiser {
     /// OIDN's runtime pipeline (`hush_net::denoise`: autoexposure of the input, transfer, network, inverse
     /// transfer).
     pub fn denoise(&self, color: &Image, aux: &[&Image]) -> Result<Image> {
+        self.check_inputs(color, aux)?;
+        let aux_data: Vec<&[f32]> = aux.iter().map(|a| a.data.as_slice()).collect();
+        let out = hush_net::denoise(&self.net, &self.info, color.width, color.height, &color.data, &aux_data)?;
+        Ok(Image::new(color.width, color.height, 3, out)?)
+    }
+
+    /// [`Self::denoise`] in the first `poses` of the square's 8 symmetries ([`hush_net::ensemble::pose`]: 2 the
+    /// x flip, 4 the flips, 8 the flips and transposes): every input turned, denoised and turned back; one
+    /// image per pose, the first the plain [`Self::denoise`].
+    pub fn denoise_poses(&self, color: &Image, aux: &[&Image], poses: usize) -> Result<Vec<Image>> {
+        use hush_net::ensemble::{POSES, pose, unpose};
+        if !(1..=POSES).contains(&poses) {
+            bail!("poses must be 1 to {POSES}, got {poses}");
+        }
+        self.check_inputs(color, aux)?;
+        let (w, h) = (color.width, color.height);
+        (0..poses)
+            .map(|k| {
+                let (c, pw, ph) = pose(&color.data, w, h, 3, k);
+                let posed: Vec<Vec<f32>> = aux.iter().map(|a| pose(&a.data, w, h, 3, k).0).collect();
+                let refs: Vec<&[f32]> = posed.iter().map(|a| a.as_slice()).collect();
+                let y = hush_net::denoise(&self.net, &self.info, pw, ph, &c, &refs)?;
+                Ok(Image::new(w, h, 3, unpose(&y, pw, ph, 3, k))?)
+            })
+            .collect()
+    }
+
+    fn check_inputs(&self, color: &Image, aux: &[&Image]) -> Result<()> {
         if color.channels != 3 {
             bail!("the color image has {} channels; 3 (RGB) are needed", color.channels);
         }
@@ -140,9 +206,7 @@ impl Denoiser {
                 );
             }
         }
-        let aux_data: Vec<&[f32]> = aux.iter().map(|a| a.data.as_slice()).collect();
-        let out = hush_net::denoise(&self.net, &self.info, color.width, color.height, &color.data, &aux_data)?;
-        Ok(Image::new(color.width, color.height, 3, out)?)
+        Ok(())
     }
 }
 

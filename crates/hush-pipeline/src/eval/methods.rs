@@ -3,12 +3,12 @@
 
 use std::path::Path;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use hush_dataset::{Image, ViewImages};
 use hush_eval::guided::{GuidedParams, guided_filter};
 use hush_eval::{NOISY, Skipped, external, time_median};
 
-use super::denoiser::{Denoiser, aux_of, blend_input, keep_exact};
+use super::denoiser::{Denoiser, aux_of, blend_input, combine, keep_exact};
 
 /// What produced one test image, and how.
 pub trait Method {
@@ -118,6 +118,12 @@ pub struct Model {
     /// ([`hush_net::blend_input`]), where the view has the render's variance (after the members' mean, before
     /// keeping exact pixels).
     pub blend_input: Option<f32>,
+    /// Each member runs in this many poses ([`Denoiser::denoise_poses`]); every output counts once in the mean.
+    pub poses: usize,
+    /// Where the outputs (members and poses) are several and the view has the render's variance, put back the
+    /// input's low band where they disagree, at this Gaussian std in pixels
+    /// ([`hush_net::ensemble::restore_low_band`]; after the mean, before blending the input).
+    pub restore_low_band: Option<f32>,
 }
 
 impl Method for Model {
@@ -137,17 +143,11 @@ impl Method for Model {
             .collect::<Result<Vec<_>>>()?;
         let variance = images.variance.as_ref();
         let (image, seconds) = timed(timing_runs, || {
-            let mut out: Option<Image> = None;
+            let mut outputs = Vec::new();
             for (denoiser, aux) in self.denoisers.iter().zip(&auxes) {
-                let y = denoiser.denoise(&images.color, aux)?;
-                match out.as_mut() {
-                    None => out = Some(y),
-                    Some(sum) => sum.data.iter_mut().zip(&y.data).for_each(|(s, v)| *s += v),
-                }
+                outputs.extend(denoiser.denoise_poses(&images.color, aux, self.poses.max(1))?);
             }
-            let mut out = out.context("a model with no members")?;
-            let n = self.denoisers.len() as f32;
-            out.data.iter_mut().for_each(|v| *v /= n);
+            let (mut out, _) = combine(&outputs, &images.color, variance, self.restore_low_band)?;
             if let (Some(tau), Some(variance)) = (self.blend_input, variance) {
                 blend_input(&mut out, &images.color, variance, tau)?;
             }

@@ -15,7 +15,7 @@ use hush_dataset::{AuxSource, Image, Manifest, Split, load_view_with, write_png_
 use hush_eval::viewer::file_safe;
 use hush_eval::{REFERENCE, Report, Row, Viewer, compare, exposure_of};
 
-pub use denoiser::{Denoiser, aux_of, blend_input, keep_exact};
+pub use denoiser::{Denoiser, aux_of, blend_input, combine, keep_exact};
 pub use methods::{BASELINES, Method, Model, Run, baseline, method_name};
 
 use crate::Observer;
@@ -59,6 +59,14 @@ pub struct EvalPlan {
     /// pixel's standard error ([`hush_net::blend_input`]) with this relative error of the network, where the
     /// dataset stores the render's variance. `None`: the networks' output as it is.
     pub blend_input: Option<f32>,
+    /// Run every network hush runs in this many poses of the square's symmetries and average them
+    /// ([`Denoiser::denoise_poses`]: 1 the network as it is, 2 with the x flip, 4 the flips, 8 the flips and
+    /// transposes); the time is that of all of them.
+    pub poses: usize,
+    /// Where a method has several outputs (poses or ensemble members), put back the input's low band where they
+    /// disagree, at this Gaussian std in pixels ([`hush_net::ensemble::restore_low_band`]), where the dataset
+    /// stores the render's variance. `None`: their mean as it is.
+    pub restore_low_band: Option<f32>,
 }
 
 impl EvalPlan {
@@ -79,6 +87,8 @@ impl EvalPlan {
             device: None,
             keep_exact: true,
             blend_input: None,
+            poses: 1,
+            restore_low_band: None,
         }
     }
 }
@@ -131,7 +141,14 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
             }
             denoisers.push(denoiser);
         }
-        methods.push(Box::new(Model { name, denoisers, keep_exact: plan.keep_exact, blend_input: plan.blend_input }));
+        methods.push(Box::new(Model {
+            name,
+            denoisers,
+            keep_exact: plan.keep_exact,
+            blend_input: plan.blend_input,
+            poses: plan.poses,
+            restore_low_band: plan.restore_low_band,
+        }));
     }
     if plan.official {
         if sets.is_empty() {
@@ -155,6 +172,8 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
                 denoisers: vec![Denoiser::official_on(&weights, &device)?],
                 keep_exact: plan.keep_exact,
                 blend_input: plan.blend_input,
+                poses: plan.poses,
+                restore_low_band: plan.restore_low_band,
             }));
         }
     }
@@ -204,7 +223,7 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
 
     // A model that takes the variance needs it; keeping exact pixels only uses it where it reads.
     let variance_needed = methods.iter().any(|m| m.needs_variance());
-    let variance_wanted = plan.keep_exact || plan.blend_input.is_some();
+    let variance_wanted = plan.keep_exact || plan.blend_input.is_some() || plan.restore_low_band.is_some();
     let mut unreadable_variance = Vec::new();
     if plan.keep_exact {
         report.notes.push(
@@ -222,6 +241,28 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
              pixel's standard error (`--blend-input {tau}`): its weight is τ²L²/(τ²L² + s²), with τ = {tau} the \
              network's assumed relative error, L the denoised pixel's level and s² the render's variance of the \
              pixel's mean averaged over its 5×5 window, where the dataset stores the render's variance."
+        ));
+    }
+    if plan.poses > 1 {
+        report.notes.push(format!(
+            "Each network hush runs (its models and OIDN's official weights alike) denoises every input in {} poses \
+             of the square's symmetries (`--poses {}`: {}), turned back and averaged; its time is that of all of \
+             them.",
+            plan.poses,
+            plan.poses,
+            match plan.poses {
+                2 => "as it is and flipped left to right",
+                3 | 4 => "as it is and flipped in x, in y and both",
+                _ => "as it is, flipped in x, in y and both, and each of those transposed",
+            }
+        ));
+    }
+    if let Some(sigma) = plan.restore_low_band {
+        report.notes.push(format!(
+            "Where a method's outputs are several (poses or ensemble members), the noisy input's low band (Gaussian \
+             std {sigma} px) is put back after their mean where they disagree (`--restore-low-band {sigma}`): \
+             weight e²/(e² + s²), e² the outputs' sample variance in that band and s² the input's, from the \
+             render's variance, where the dataset stores it; values clamped at the display's white point."
         ));
     }
     for view in &views {
