@@ -1187,11 +1187,22 @@ fn denoise_without_a_model_uses_the_default_for_its_inputs() {
     let out = dir.join("denoised.exr");
     let stderr = expect_success(&["denoise", "--color", s(&render), "--out", s(&out)]);
     assert!(stderr.contains("model: hush_alb_nrm (shipped)"), "{stderr}");
+    assert!(stderr.contains("denoising in 8 poses, the input's low band restored"), "{stderr}");
     let denoised = hush_dataset::read_rgb(&out).unwrap();
+    // The shipped model's own setting (8 poses, the low band at 2 px), which a --model runs only when asked;
+    // the flags override the built-in model's setting.
     let shipped = dir.join("shipped.exr");
     let model = repo().join("data/models/hush_alb_nrm.safetensors");
-    expect_success(&["denoise", "--model", s(&model), "--color", s(&render), "--out", s(&shipped)]);
+    let with_model = ["denoise", "--model", s(&model), "--color", s(&render)];
+    expect_success(&[&with_model[..], &["--poses", "8", "--restore-low-band", "2", "--out", s(&shipped)]].concat());
     assert!(hush_dataset::read_rgb(&shipped).unwrap() == denoised, "the default is not data/models/hush_alb_nrm");
+    let (one, one_default) = (dir.join("one.exr"), dir.join("one-default.exr"));
+    let stderr = expect_success(&[&with_model[..], &["--out", s(&one)]].concat());
+    assert!(!stderr.contains("poses"), "a chosen model runs once: {stderr}");
+    expect_success(&["denoise", "--color", s(&render), "--poses", "1", "--out", s(&one_default)]);
+    let one = hush_dataset::read_rgb(&one).unwrap();
+    assert!(hush_dataset::read_rgb(&one_default).unwrap() == one, "--poses 1 is the network once");
+    assert!(one != denoised, "8 poses and the restored band changed nothing");
     assert_eq!((denoised.width, denoised.height, denoised.count_non_finite()), (32, 32, 0));
 
     let color = dir.join("color.exr");
@@ -1289,21 +1300,23 @@ fn denoise_keeps_the_pixels_whose_samples_all_agreed() {
     assert!(!refused.status.success() && stderr.contains("relative error is a positive number"), "{stderr}");
     // --poses: the mean over the square's symmetries, close to the network's single pose but not it;
     // --restore-low-band moves it toward the render where the poses disagree; bad values are refused.
-    let (posed, restored) = (dir.join("posed.exr"), dir.join("restored.exr"));
+    let (one, posed, restored) = (dir.join("one.exr"), dir.join("posed.exr"), dir.join("restored.exr"));
     let denoise_with = |extra: &[&str], out: &std::path::Path| {
         expect_success(
             &[&["denoise", "--color", s(&render), "--keep-exact", "false"][..], extra, &["--out", s(out)]].concat(),
         )
     };
-    denoise_with(&["--poses", "8"], &posed);
+    denoise_with(&["--poses", "1"], &one);
+    denoise_with(&["--poses", "8", "--restore-low-band", "off"], &posed);
     let stderr = denoise_with(&["--poses", "8", "--restore-low-band", "2"], &restored);
     assert!(stderr.contains("restored the input's low band where the 8 poses disagree"), "{stderr}");
-    let (posed, restored) = (hush_dataset::read_rgb(&posed).unwrap(), hush_dataset::read_rgb(&restored).unwrap());
+    let [one, posed, restored] = [one, posed, restored].map(|p| hush_dataset::read_rgb(&p).unwrap());
+    assert!(restored == raw_img, "the shipped model's default is 8 poses with the band at 2 px");
     let rms = |a: &[f32], b: &[f32]| {
         (a.iter().zip(b).map(|(x, y)| f64::from(x - y).powi(2)).sum::<f64>() / a.len() as f64).sqrt()
     };
     let level = (raw_img.data.iter().map(|v| f64::from(*v).powi(2)).sum::<f64>() / raw_img.data.len() as f64).sqrt();
-    let apart = rms(&posed.data, &raw_img.data);
+    let apart = rms(&posed.data, &one.data);
     assert!(apart > 0.0 && apart < 0.1 * level, "the poses' mean is {apart} from one pose (level {level})");
     assert!(restored.data != posed.data, "nothing restored");
     assert!(rms(&restored.data, &color.data) < rms(&posed.data, &color.data), "restoring moved away from the input");
@@ -1351,7 +1364,8 @@ fn an_unreadable_variance_only_skips_keeping_exact_pixels() {
 
 /// `hush denoise` reads and writes PFM, OIDN's format: the color, albedo and normal of a `hush render` EXR
 /// written as PFM files denoise to the image the EXR itself denoises to, bit for bit (the same pixels and
-/// model; the EXR's variance layer, which the PFM files lack, is left unused with `--keep-exact false`), and
+/// model; the EXR's variance layer, which the PFM files lack, is left unused with `--keep-exact false` and
+/// `--restore-low-band off`), and
 /// the output is a PFM where its name says so.
 #[test]
 fn denoise_reads_and_writes_pfm() {
@@ -1364,9 +1378,15 @@ fn denoise_reads_and_writes_pfm() {
         hush_dataset::write_pfm(path, &exr.layer(layer).unwrap()).unwrap();
     }
     let (from_exr, from_pfm) = (dir.join("from-exr.exr"), dir.join("from-pfm.pfm"));
-    expect_success(&["denoise", "--color", s(&render), "--keep-exact", "false", "--out", s(&from_exr)]);
+    // The EXR's variance would also restore the low band, which the PFM files cannot: off on both.
+    let off = ["--restore-low-band", "off"];
+    expect_success(
+        &[&["denoise", "--color", s(&render), "--keep-exact", "false", "--out", s(&from_exr)][..], &off].concat(),
+    );
     let [c, a, n] = [&paths[0], &paths[1], &paths[2]].map(|p| s(p));
-    let stderr = expect_success(&["denoise", "--color", c, "--albedo", a, "--normal", n, "--out", s(&from_pfm)]);
+    let stderr = expect_success(
+        &[&["denoise", "--color", c, "--albedo", a, "--normal", n, "--out", s(&from_pfm)][..], &off].concat(),
+    );
     assert!(stderr.contains("model: hush_alb_nrm (shipped)"), "{stderr}");
     assert_eq!(hush_dataset::read_pfm(&from_pfm).unwrap(), hush_dataset::read_rgb(&from_exr).unwrap());
     // A PFM color carries no feature layers: without the flags the model is color-only.

@@ -69,6 +69,10 @@ const DATASET_ARGS: [&str; 16] = [
 ];
 /// The evaluated spp (the issue's ladder).
 const EVAL_SPP: &str = "4,16,64,256";
+/// How `hush denoise` runs a shipped model by default (`hush_pipeline::shipped::ShippedModel::inference`, which
+/// xtask does not link; the end-to-end test `denoise_without_a_model_uses_the_default_for_its_inputs` pins
+/// hush's side): the card also reports the test scenes under these options.
+const SHIPPED_INFERENCE: [&str; 4] = ["--poses", "8", "--restore-low-band", "2"];
 /// Fine-tuning steps per model (about 17 minutes on 2 cores for a `unet`, 41 for the `unet_large`). The recipe (whole 96² images as crops,
 /// Adam with OIDN's one-cycle schedule to the peak rate below, the run's last weights interpolated with
 /// OIDN's; the loss below) was chosen on the validation scenes' PSNR gain over official OIDN at 4–64 spp,
@@ -255,9 +259,14 @@ pub fn run(args: &[String]) -> Result<()> {
             Some(_) => Some(held_out_rows(&eval_dir, &format!("oidn-2.5.1/{}", model.init), &oidn_method)?),
             None => None,
         };
+        // The same test scenes as `hush denoise` runs the model (both rows getting the options).
+        let shipped_dir = dir.join(format!("eval-{}-as-shipped", model.name));
+        spawn(eval_command(&hush, &dataset, std::slice::from_ref(&trained), &shipped_dir).args(SHIPPED_INFERENCE))?;
+        let shipped_rows = held_out_rows(&shipped_dir, &format!("{}/{}", model.name, blend_stem(t)), &oidn_method)?;
         let facts = RunFacts::read(&dataset, &run_dir, Choice { t, validation })?;
-        let card =
+        let mut card =
             model_card(model, &shown, &manifest_hash, (&rows, extra_rows.as_deref()), &timing, &facts, dataset_seconds);
+        card.push_str(&as_shipped(&shipped_rows));
         let target = models_dir.join(format!("{}.safetensors", model.name));
         copy(&trained, &target)?;
         let mut export = Command::new(&hush);
@@ -620,7 +629,71 @@ fn model_card(
     md
 }
 
+/// The card's section on the test scenes under [`SHIPPED_INFERENCE`].
+fn as_shipped(cases: &[Case]) -> String {
+    let failing: Vec<String> = cases
+        .iter()
+        .filter(|c| !c.failed.is_empty())
+        .map(|c| format!("{} at {} spp: {}", c.view, c.spp, c.failed.join("; ")))
+        .collect();
+    let spps: Vec<u64> = {
+        let mut s: Vec<u64> = cases.iter().map(|c| c.spp).collect();
+        s.sort_unstable();
+        s.dedup();
+        s
+    };
+    let mean = |spp: u64, f: fn(&Case) -> f64| {
+        let v: Vec<f64> = cases.iter().filter(|c| c.spp == spp).map(f).collect();
+        v.iter().sum::<f64>() / v.len().max(1) as f64
+    };
+    let row = |f: fn(&Case) -> f64| spps.iter().map(|&s| format!("{:.2}", mean(s, f))).collect::<Vec<_>>().join(" / ");
+    format!(
+        "\n## As `hush denoise` runs it\n\n`hush denoise` without `--model` runs the model with `{}`: the image in \
+         all 8 poses of the square (flips and transposes), averaged, and the render's low band put back where they \
+         disagree (about 8 times the time of one pass). The test scenes evaluated so, official OIDN given the same \
+         options (`hush eval ... {}`): mean PSNR at {} spp {} dB against OIDN's {}; {}. Guards: {} of {} cases hold{}.\n",
+        SHIPPED_INFERENCE.join(" "),
+        SHIPPED_INFERENCE.join(" "),
+        spps.iter().map(u64::to_string).collect::<Vec<_>>().join(" / "),
+        row(|c| c.model),
+        row(|c| c.oidn),
+        summary_line(cases),
+        cases.len() - failing.len(),
+        cases.len(),
+        if failing.is_empty() { String::new() } else { format!("; failing: {}", failing.join("; ")) }
+    )
+}
+
 fn copy(from: &Path, to: &Path) -> Result<()> {
     let bytes = std::fs::read(from).map_err(|e| format!("reading {}: {e}", from.display()))?;
     crate::util::write_atomic_with(to, |tmp| std::fs::write(tmp, &bytes))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The card's section under the shipped options: means per spp, the options, and the failing cases named.
+    #[test]
+    fn as_shipped_reports_means_options_and_failures() {
+        let case = |view: &str, spp, oidn, model, failed: &[&str]| Case {
+            view: view.into(),
+            spp,
+            noisy: 20.0,
+            oidn,
+            model,
+            failed: failed.iter().map(|f| f.to_string()).collect(),
+        };
+        let cases = [
+            case("a_v000", 4, 30.0, 31.0, &[]),
+            case("b_v000", 4, 32.0, 32.0, &[]),
+            case("a_v000", 256, 40.0, 39.0, &["flip 0.0212 worse than the noisy input's 0.0209"]),
+        ];
+        let text = as_shipped(&cases);
+        assert!(text.contains("`--poses 8 --restore-low-band 2`"), "{text}");
+        assert!(text.contains("mean PSNR at 4 / 256 spp 31.50 / 39.00 dB against OIDN's 31.00 / 40.00"), "{text}");
+        assert!(text.contains("+0.50 dB over official OIDN on average"), "{text}");
+        assert!(text.contains("2 of 3 cases hold; failing: a_v000 at 256 spp: flip 0.0212"), "{text}");
+        assert!(as_shipped(&cases[..2]).contains("2 of 2 cases hold.\n"));
+    }
 }

@@ -14,6 +14,23 @@ pub struct ShippedModel {
     pub aux: &'static [Feature],
     /// The safetensors file (`hush train`'s format).
     pub bytes: &'static [u8],
+    /// How it runs by default: the setting under which its card's guards hold on the held-out scenes.
+    pub inference: Inference,
+}
+
+/// How a denoiser runs a network on one image: in how many poses of the square
+/// ([`crate::Denoiser::denoise_poses`]), and whether the input's low band is put back where they disagree
+/// ([`crate::combine`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Inference {
+    pub poses: usize,
+    /// The Gaussian's std in pixels; `None`: the poses' mean as it is.
+    pub restore_low_band: Option<f32>,
+}
+
+impl Inference {
+    /// The network once, as OIDN's runtime runs it.
+    pub const PLAIN: Inference = Inference { poses: 1, restore_low_band: None };
 }
 
 impl ShippedModel {
@@ -30,6 +47,9 @@ pub const DEFAULTS: [ShippedModel; 1] = [ShippedModel {
     name: "hush_alb_nrm",
     aux: &[Feature::Albedo, Feature::Normal],
     bytes: include_bytes!("../../../data/models/hush_alb_nrm.safetensors"),
+    // Every guard on the test scenes holds in 8 poses with the low band at 2 px; with one pose two FLIP guards
+    // at 256 spp fail (docs/results/train-default/README.md).
+    inference: Inference { poses: 8, restore_low_band: Some(2.0) },
 }];
 
 /// What a denoiser without a chosen model runs.
@@ -47,6 +67,14 @@ impl DefaultModel {
         match self {
             DefaultModel::Shipped(m) => format!("{} (shipped)", m.name),
             DefaultModel::Official(w) => w.method_name(),
+        }
+    }
+
+    /// How it runs by default: the shipped model's [`ShippedModel::inference`], OIDN's weights plain.
+    pub fn inference(&self) -> Inference {
+        match self {
+            DefaultModel::Shipped(m) => m.inference,
+            DefaultModel::Official(_) => Inference::PLAIN,
         }
     }
 

@@ -191,14 +191,17 @@ pub struct DenoiseArgs {
     #[arg(long, value_parser = parse_relative_error)]
     pub blend_input: Option<f32>,
     /// Denoise in this many poses of the square's symmetries and average them: 1 the network as it is, 2 also
-    /// flipped left to right, 4 the flips in x, y and both, 8 those and their transposes (8 times the time).
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=8))]
-    pub poses: u8,
-    /// With several poses (or models), put back the input's low band (a Gaussian of this std in pixels; 2 was
-    /// chosen on validation scenes) where the outputs disagree, weighted by their spread against the band's
-    /// noise from the render's variance (as for --keep-exact). Off when not given.
+    /// flipped left to right, 4 the flips in x, y and both, 8 those and their transposes (8 times the time)
+    /// [default: the shipped model's setting when --model is not given (8 for hush_alb_nrm, under which its
+    /// card's guards hold), else 1].
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=8))]
+    pub poses: Option<u8>,
+    /// With several poses, put back the input's low band (a Gaussian of this std in pixels; 2 was chosen on
+    /// validation scenes) where the outputs disagree, weighted by their spread against the band's noise from
+    /// the render's variance (as for --keep-exact); `off` for none [default: the shipped model's setting when
+    /// --model is not given (2 for hush_alb_nrm), else off].
     #[arg(long, value_parser = parse_sigma)]
-    pub restore_low_band: Option<f32>,
+    pub restore_low_band: Option<Sigma>,
 }
 
 #[derive(Args, Debug)]
@@ -256,9 +259,9 @@ pub struct EvalArgs {
     pub poses: u8,
     /// With several poses (or models), put back the input's low band (a Gaussian of this std in pixels; 2 was
     /// chosen on validation scenes) where the outputs disagree, weighted by their spread against the band's
-    /// noise from the render's variance (as for --keep-exact). Off when not given.
+    /// noise from the render's variance, where the dataset stores it. Off when not given (or `off`).
     #[arg(long, value_parser = parse_sigma)]
-    pub restore_low_band: Option<f32>,
+    pub restore_low_band: Option<Sigma>,
 }
 
 impl EvalArgs {
@@ -277,16 +280,23 @@ impl EvalArgs {
             keep_exact: self.keep_exact,
             blend_input: self.blend_input,
             poses: usize::from(self.poses),
-            restore_low_band: self.restore_low_band,
+            restore_low_band: self.restore_low_band.and_then(|s| s.0),
         }
     }
 }
 
-fn parse_sigma(s: &str) -> Result<f32, String> {
+/// `--restore-low-band`: a Gaussian's std in pixels, or `None` for `off`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sigma(pub Option<f32>);
+
+fn parse_sigma(s: &str) -> Result<Sigma, String> {
+    if s == "off" {
+        return Ok(Sigma(None));
+    }
     match s.parse::<f32>() {
-        Ok(v) if v.is_finite() && v > 0.0 && v <= 64.0 => Ok(v),
+        Ok(v) if v.is_finite() && v > 0.0 && v <= 64.0 => Ok(Sigma(Some(v))),
         Ok(v) => Err(format!("a Gaussian's std in pixels above 0 and at most 64, got {v}")),
-        Err(e) => Err(format!("{e}: a Gaussian's std in pixels, e.g. 2")),
+        Err(e) => Err(format!("{e}: a Gaussian's std in pixels, e.g. 2, or off")),
     }
 }
 

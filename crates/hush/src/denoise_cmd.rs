@@ -5,7 +5,7 @@ use anyhow::{Context, Result, bail};
 use hush_dataset::{ExrImage, Image, read_exr, read_pfm, read_rgb, write_pfm, write_rgb};
 use hush_net::{Feature, InputFeatures};
 use hush_pipeline::Denoiser;
-use hush_pipeline::shipped::default_for;
+use hush_pipeline::shipped::{Inference, default_for};
 
 use crate::cli::DenoiseArgs;
 
@@ -49,8 +49,8 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
     let layer = |f: Feature| exr.as_ref().and_then(|exr| feature_layer(exr, f));
     let has_layer = |f: Feature| layer(f).is_some();
     let device = hush_pipeline::device(args.device.as_deref())?;
-    let (model, model_name) = match &args.model {
-        Some(path) => (Denoiser::load_on(path, &device)?, path.display().to_string()),
+    let (model, model_name, inference) = match &args.model {
+        Some(path) => (Denoiser::load_on(path, &device)?, path.display().to_string(), Inference::PLAIN),
         None => {
             // The shipped model for the features at hand where one beats OIDN on the held-out scenes
             // (`cargo xtask train-default` measures it), else OIDN's official weights for them; both built in
@@ -63,11 +63,20 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
             };
             let model = default_for(&InputFeatures { aux: features });
             eprintln!("model: {} (built in; --model to choose another)", model.name());
-            (model.denoiser_on(&device)?, model.name())
+            (model.denoiser_on(&device)?, model.name(), model.inference())
         }
     };
+    // The flags override the model's default setting.
+    let poses = args.poses.map_or(inference.poses, usize::from);
+    let restore_low_band = args.restore_low_band.map_or(inference.restore_low_band, |s| s.0);
+    if poses > 1 {
+        eprintln!(
+            "denoising in {poses} poses{} (--poses 1 for one pass, {poses} times faster)",
+            if restore_low_band.is_some() { ", the input's low band restored where they disagree" } else { "" }
+        );
+    }
     // The variance also serves --keep-exact and --blend-input, whatever the model takes.
-    let wants_variance = args.keep_exact || args.blend_input.is_some() || args.restore_low_band.is_some();
+    let wants_variance = args.keep_exact || args.blend_input.is_some() || restore_low_band.is_some();
     let unused = |f: &Feature| !(model.features().contains(f) || (*f == Feature::Variance && wants_variance));
     for f in Feature::ALL.into_iter().filter(|f| given(*f).is_some() && unused(f)) {
         eprintln!("warning: --{} is ignored: model {} takes {}", f.long_name(), model_name, model.info.features);
@@ -130,10 +139,16 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
     };
     let refs: Vec<&Image> = aux.iter().collect();
     let start = std::time::Instant::now();
-    let outputs = model.denoise_poses(&color, &refs, usize::from(args.poses))?;
-    let (mut out, restored) = hush_pipeline::combine(&outputs, &color, variance.as_ref(), args.restore_low_band)?;
-    if let Some(weight) = restored {
-        eprintln!("restored the input's low band where the {} poses disagree: its mean weight {weight:.4}", args.poses);
+    let outputs = model.denoise_poses(&color, &refs, poses)?;
+    let (mut out, restored) = hush_pipeline::combine(&outputs, &color, variance.as_ref(), restore_low_band)?;
+    match restored {
+        Some(weight) => {
+            eprintln!("restored the input's low band where the {poses} poses disagree: its mean weight {weight:.4}")
+        }
+        None if restore_low_band.is_some() && poses > 1 => {
+            eprintln!("warning: the input's low band was not restored: no usable variance for the color")
+        }
+        None => {}
     }
     if let (Some(tau), Some(v)) = (args.blend_input, &variance) {
         let weight = hush_pipeline::blend_input(&mut out, &color, v, tau)?;
