@@ -146,7 +146,10 @@ pub fn run(args: DenoiseArgs) -> Result<()> {
             eprintln!("restored the input's low band where the {poses} poses disagree: its mean weight {weight:.4}")
         }
         None if restore_low_band.is_some() && poses > 1 => {
-            eprintln!("warning: the input's low band was not restored: no usable variance for the color")
+            eprintln!(
+                "warning: the input's low band was not restored: no usable variance for the color (give \
+                 --variance, or a `hush render` EXR, which carries it; --restore-low-band off to silence this)"
+            )
         }
         None => {}
     }
