@@ -15,6 +15,18 @@ use crate::transfer::{DISPLAY_WHITE, autoexposure};
 /// transpose.
 pub const POSES: usize = 8;
 
+/// What each pose does, in order: what reports say of the first N.
+pub const POSE_NAMES: [&str; POSES] = [
+    "as it is",
+    "flipped in x",
+    "flipped in y",
+    "flipped in both",
+    "transposed",
+    "transposed then flipped in x",
+    "transposed then flipped in y",
+    "transposed then flipped in both",
+];
+
 /// Pose `k` (0..[`POSES`]) of an interleaved `width × height × channels` image: the transpose first where bit 2
 /// is set, then a flip of x (bit 0) and of y (bit 1). Returns the pixels and the new width and height (swapped
 /// by the transpose). Poses 0..2 flip x only; 0..4 are the flips without the transpose.
@@ -182,6 +194,19 @@ fn blur(data: &[f32], width: usize, height: usize, channels: usize, kernel: &[f3
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The names say what the poses do: pose 3 flips both ways (the first pixel becomes the last), pose 4
+    /// transposes.
+    #[test]
+    fn pose_names_match_the_poses() {
+        let image: Vec<f32> = (0..6).map(|v| v as f32).collect(); // 3×2, one channel
+        assert_eq!(POSE_NAMES[3], "flipped in both");
+        assert_eq!(pose(&image, 3, 2, 1, 3).0, vec![5.0, 4.0, 3.0, 2.0, 1.0, 0.0]);
+        assert_eq!(POSE_NAMES[4], "transposed");
+        assert_eq!(pose(&image, 3, 2, 1, 4).0, vec![0.0, 3.0, 1.0, 4.0, 2.0, 5.0]);
+        assert_eq!(POSE_NAMES[5], "transposed then flipped in x");
+        assert_eq!(pose(&image, 3, 2, 1, 5).0, vec![3.0, 0.0, 4.0, 1.0, 5.0, 2.0]);
+    }
 
     #[test]
     fn mirror_reflects_without_repeating_the_edge() {

@@ -250,11 +250,7 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
              them.",
             plan.poses,
             plan.poses,
-            match plan.poses {
-                2 => "as it is and flipped left to right",
-                3 | 4 => "as it is and flipped in x, in y and both",
-                _ => "as it is, flipped in x, in y and both, and each of those transposed",
-            }
+            hush_net::ensemble::POSE_NAMES[..plan.poses.min(hush_net::ensemble::POSES)].join(", ")
         ));
     }
     if let Some(sigma) = plan.restore_low_band {
