@@ -1208,7 +1208,15 @@ fn denoise_without_a_model_uses_the_default_for_its_inputs() {
     let color = dir.join("color.exr");
     hush_dataset::write_rgb(&color, &hush_dataset::read_rgb(&render).unwrap()).unwrap();
     let stderr = expect_success(&["denoise", "--color", s(&color), "--out", s(&out)]);
-    assert!(stderr.contains("model: oidn-2.5.1 rt_hdr "), "{stderr}");
+    assert!(stderr.contains("model: hush_color (shipped)"), "{stderr}");
+    assert!(stderr.contains("denoising in 8 poses"), "{stderr}");
+    // Inputs no shipped model takes get OIDN's official weights, run once.
+    let albedo = dir.join("albedo.exr");
+    let exr = hush_dataset::read_exr(&render).unwrap();
+    hush_dataset::write_rgb(&albedo, &exr.layer("albedo").unwrap()).unwrap();
+    let stderr = expect_success(&["denoise", "--color", s(&color), "--albedo", s(&albedo), "--out", s(&out)]);
+    assert!(stderr.contains("model: oidn-2.5.1 rt_hdr_alb "), "{stderr}");
+    assert!(!stderr.contains("poses"), "{stderr}");
 }
 
 /// `hush denoise` keeps the rendered value where every sample of a pixel agreed (a constant sky seen

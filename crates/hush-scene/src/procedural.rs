@@ -330,11 +330,18 @@ pub enum Style {
     /// above without the environment ingredient), sometimes with a small, very bright sun and bulbs in
     /// view.
     Open,
+    /// Lights in view, as in Veach's multiple-importance scene: spheres and disks of every size from a
+    /// fraction of a pixel (on a film with a wide filter) to a fifth of the frame, the smaller the brighter
+    /// (radiance up to hundreds of thousands), above glossy plates of several roughnesses that reflect them
+    /// toward the camera, against a dark or dim backdrop. Their rims (a very bright disk meeting a dark or
+    /// noisy surround) and their glossy reflections are what a denoiser without auxiliary features must
+    /// keep sharp.
+    Lamps,
 }
 
 impl Style {
     /// Every style, by name.
-    pub const ALL: [Style; 5] = [Style::Standard, Style::Dark, Style::Glass, Style::Spotlit, Style::Open];
+    pub const ALL: [Style; 6] = [Style::Standard, Style::Dark, Style::Glass, Style::Spotlit, Style::Open, Style::Lamps];
 
     pub fn name(self) -> &'static str {
         match self {
@@ -343,6 +350,7 @@ impl Style {
             Style::Glass => "glass",
             Style::Spotlit => "spotlit",
             Style::Open => "open",
+            Style::Lamps => "lamps",
         }
     }
 
@@ -415,8 +423,10 @@ impl<'a> Gen<'a> {
     }
 
     fn scene(&mut self) {
-        if self.style == Style::Open {
-            return self.open_scene();
+        match self.style {
+            Style::Open => return self.open_scene(),
+            Style::Lamps => return self.lamps_scene(),
+            _ => {}
         }
         let r = &mut self.rng;
         self.room = Vec3::new(r.range(3.0, 9.0), r.range(2.4, 4.0), r.range(3.0, 9.0));
@@ -776,8 +786,8 @@ impl<'a> Gen<'a> {
             Style::Glass => (1, self.rng.below(2), self.rng.below(3)),
             Style::Spotlit => (0, self.rng.below(2), 1 + self.rng.below(3)),
             Style::Dark => (0, 1, 0),
-            // Open scenes have no room: `open_scene` lights them.
-            Style::Open => (0, 0, 0),
+            // Open scenes have no room: `open_scene` and `lamps_scene` light them.
+            Style::Open | Style::Lamps => (0, 0, 0),
         };
         for _ in 0..large {
             let (hx, hz) = (self.rng.range(0.3, 1.0), self.rng.range(0.3, 1.0));
@@ -1035,6 +1045,122 @@ impl<'a> Gen<'a> {
         self.write_header(target, fov);
     }
 
+    /// Lights in view above glossy plates ([`Style::Lamps`]): the camera looks across a patch of ground at a
+    /// band of 2 to 5 emitting spheres or disks (radius 0.005 or 0.02 to 0.6 m, radiance × radius² = 0.2 to 8,
+    /// as veach-mis's lights have 7.6, so radiance 0.6 to 320 000), with 2 to 4 plates tilted to mirror them into the camera (GGX roughness 0.01 to
+    /// 0.3), a few objects on the ground, and a black, dim or lit backdrop.
+    fn lamps_scene(&mut self) {
+        let r = &mut self.rng;
+        let dist = r.range(3.0, 6.0);
+        self.room = Vec3::new(r.range(3.0, 6.0), 6.0, dist + 1.5);
+        let room = self.room;
+        self.camera = Vec3::new(0.5 * room.x + r.range(-0.3, 0.3), r.range(0.8, 2.0), 0.0);
+        let target = Vec3::new(0.5 * room.x + r.range(-0.3, 0.3), r.range(0.6, 1.4), dist);
+        // fov 35° to 50°: the frame's half-height at the target is at least 0.31 × dist.
+        let fov = r.range(35.0, 50.0);
+        let half = 0.3 * (target - self.camera).length();
+        let forward = (target - self.camera).normalize();
+        let right = forward.cross(Vec3::Y).normalize();
+        let up = right.cross(forward);
+        self.footprints.push(Footprint { x: self.camera.x, z: self.camera.z, r: 0.5 });
+        let ground = self.surface_material();
+        let centre = Vec3::new(room.x / 2.0, 0.0, room.z / 2.0);
+        self.rectangle("ground", centre, [Vec3::X * 30.0, Vec3::Z * 30.0], Vec3::Y, &ground, None);
+        // The backdrop: black (only the lamps light the scene), a dim constant sky, or a lit wall behind.
+        match self.rng.below(3) {
+            0 => {}
+            1 if self.options.ingredients.environment => {
+                let radiance = self.rng.color(0.02, 0.15);
+                self.environment = Some(format!(
+                    "  <emitter type=\"constant\"><rgb name=\"radiance\" value=\"{}\"/></emitter>\n",
+                    v3(radiance)
+                ));
+                self.lights.push(LightKind::Constant);
+            }
+            _ => {
+                let wall = self.surface_material();
+                let at = target + forward * self.rng.range(2.0, 4.0);
+                self.rectangle("backdrop", at, [right * 20.0, Vec3::Y * 20.0], -forward, &wall, None);
+            }
+        }
+        // The lamps, spread across the upper part of the frame.
+        let count = 2 + self.rng.below(4);
+        let mut centres = Vec::with_capacity(count);
+        for i in 0..count {
+            let across = (i as f32 + 0.5) / count as f32 * 1.5 - 0.75 + self.rng.range(-0.1, 0.1);
+            // Radius log-uniform from `smallest` to 0.6 m. The frame's pixels are about 3 cm across at 96²; on a
+            // film with a wide filter the smallest lamps are a fraction of a pixel, as veach-mis's smallest
+            // light is, which the filter spreads like a firefly. A box film keeps to lamps over a pixel
+            // across: the reference's firefly filter would take a lone sub-pixel light for a firefly.
+            let smallest = if self.options.filter == PixelFilter::Box { 0.02 } else { 0.005 };
+            let radius = smallest * pow_exact(0.6 / smallest, self.rng.unit());
+            let c = target
+                + right * (across * half)
+                + up * (self.rng.range(0.1, 0.7) * half)
+                + forward * self.rng.range(-0.3, 1.0);
+            let tint = Vec3::new(1.0, self.rng.range(0.7, 1.0), self.rng.range(0.5, 1.0));
+            let radiance = tint * (self.rng.range(0.2, 8.0) / (radius * radius));
+            if self.rng.chance(0.75) {
+                self.bright_sphere("lamp", c, radius, radiance);
+            } else {
+                // A disk facing the camera: a right-handed basis takes its +z there.
+                let n = (self.camera - c).normalize();
+                let u = n.cross(Vec3::Y).normalize() * radius;
+                let v = n.cross(u).normalize() * radius;
+                let m = [[u.x, v.x, n.x, c.x], [u.y, v.y, n.y, c.y], [u.z, v.z, n.z, c.z], [0.0, 0.0, 0.0, 1.0]];
+                let values: Vec<String> = m.iter().flatten().map(|x| num(*x)).collect();
+                let black = self.black();
+                let t = format!("<matrix value=\"{}\"/>", values.join(" "));
+                self.shape("disk", "lamp", &t, &black, "", Some(radiance));
+                self.lights.push(LightKind::SmallArea);
+            }
+            centres.push(c);
+        }
+        let lamps = centres.iter().fold(Vec3::ZERO, |a, c| a + *c) / count as f32;
+        // Plates below the lamps, each tilted so that the lamps' mean mirrors into the camera.
+        let plates = 2 + self.rng.below(3);
+        for i in 0..plates {
+            let down = -0.15 - 0.6 * (i as f32 + self.rng.range(0.0, 0.8)) / plates as f32;
+            let p =
+                target + up * (down * half) + forward * self.rng.range(-1.0, -0.2) + right * self.rng.range(-0.2, 0.2);
+            let p = Vec3::new(p.x, p.y.max(0.05), p.z);
+            let n = ((self.camera - p).normalize() + (lamps - p).normalize()).normalize();
+            let u = n.cross(forward).normalize() * (self.rng.range(0.6, 1.0) * half);
+            let v = n.cross(u).normalize() * (self.rng.range(0.06, 0.15) * half);
+            let alpha = 0.01 * pow_exact(30.0, self.rng.unit());
+            let p_bsdf = if self.rng.chance(0.6) {
+                let metal = ["Al", "Ag", "Cu", "Au", "Cr"][self.rng.below(5)];
+                let params = format!(
+                    "<string name=\"material\" value=\"{metal}\"/><float name=\"alpha\" value=\"{}\"/>\
+                     <string name=\"distribution\" value=\"ggx\"/>",
+                    num(alpha)
+                );
+                self.bsdf("roughconductor", MaterialClass::Glossy, &params, true)
+            } else if self.options.ingredients.rough_plastic {
+                let c = self.rng.color(0.02, 0.3);
+                let params = format!(
+                    "<rgb name=\"diffuse_reflectance\" value=\"{}\"/><float name=\"alpha\" value=\"{}\"/>\
+                     <string name=\"distribution\" value=\"ggx\"/>",
+                    v3(c),
+                    num(alpha.max(0.01))
+                );
+                self.bsdf("roughplastic", MaterialClass::Glossy, &params, true)
+            } else {
+                self.random_material(0.0)
+            };
+            self.rectangle("plate", p, [u, v], n, &p_bsdf, None);
+        }
+        let count = self.rng.below(4);
+        for _ in 0..count {
+            match self.rng.weighted(&[1.0, 2.0, 1.0]) {
+                0 => self.a_box(0.0),
+                1 => self.a_sphere(0.0, None),
+                _ => self.a_cylinder(0.0),
+            }
+        }
+        self.write_header(target, fov);
+    }
+
     /// A `constant` sky or a generated `envmap` sky with a sun spot.
     fn sky(&mut self) {
         if self.rng.chance(0.4) {
@@ -1071,6 +1197,21 @@ impl<'a> Gen<'a> {
             self.lights.push(LightKind::EnvMap);
         }
     }
+}
+
+/// base^u for base > 0 and u in [0, 1): a product of base^(2^-k) over the bits of u (square roots are exact
+/// in IEEE arithmetic, so the value is the same on every platform).
+fn pow_exact(base: f32, u: f32) -> f32 {
+    let (mut x, mut root, mut out) = (u, base, 1.0f32);
+    for _ in 0..16 {
+        x *= 2.0;
+        root = root.sqrt();
+        if x >= 1.0 {
+            x -= 1.0;
+            out *= root;
+        }
+    }
+    out
 }
 
 /// An 8-bit RGB PNG in memory.

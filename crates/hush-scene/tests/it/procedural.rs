@@ -4,10 +4,11 @@
 use std::collections::BTreeSet;
 use std::path::Path;
 
+use glam::Vec3;
 use hush_scene::procedural::{
     GENERATOR_VERSION, GeneratedScene, GeneratorOptions, Ingredients, LightKind, MaterialClass, Style, generate,
 };
-use hush_scene::{PixelFilter, Scene};
+use hush_scene::{PixelFilter, Scene, ShapeKind};
 
 use crate::{scratch, shared};
 
@@ -37,7 +38,7 @@ fn check_round_trip(dir: &Path, g: &GeneratedScene) -> Scene {
         g.lights.iter().any(|l| matches!(l, LightKind::Constant | LightKind::EnvMap))
     );
     assert!(!g.lights.is_empty(), "seed {}: no light", g.seed);
-    if g.style != "open" {
+    if !matches!(g.style, "open" | "lamps") {
         // The camera stands inside the room, which bounds all geometry but the daylight panels.
         let (lo, hi) = scene.bounds();
         assert!(scene.camera.origin.cmpgt(lo).all() && scene.camera.origin.cmplt(hi).all(), "seed {}", g.seed);
@@ -95,6 +96,57 @@ fn all_features_load_back_too() {
         assert!(kinds.contains(k), "{k} never drawn in 40 seeds: {kinds:?}");
     }
     assert_eq!(lights.len(), LightKind::ALL.len(), "{lights:?}");
+}
+
+#[test]
+fn lamps_scenes_show_their_lights_to_the_camera_above_plates() {
+    let dir = scratch("procedural-lamps");
+    let (mut spheres, mut disks, mut backdrops, mut skies) = (0, 0, 0, 0);
+    for seed in 0..20u64 {
+        let options = GeneratorOptions {
+            width: 32,
+            height: 32,
+            style: Some(Style::Lamps),
+            filter: if seed % 2 == 0 { PixelFilter::Box } else { PixelFilter::Tent { radius: 1.0 } },
+            ..Default::default()
+        };
+        let g = generate(seed, &options);
+        assert_eq!(generate(seed, &options).xml, g.xml, "seed {seed}: reproducible");
+        let scene = check_round_trip(&dir.join(format!("s{seed}")), &g);
+        assert_eq!(g.style, "lamps");
+        let (forward, right, up) = scene.camera.basis();
+        let reach = (0.5 * scene.camera.fov_y_deg.to_radians()).tan();
+        let lamps: Vec<_> = scene.meshes.iter().filter(|m| m.name.starts_with("lamp")).collect();
+        assert!((2..=5).contains(&lamps.len()), "seed {seed}: {} lamps", lamps.len());
+        for m in &lamps {
+            let e = m.emission.expect("a lamp emits");
+            // The smaller, the brighter: radiance × radius² in [0.2, 8] for radii 0.005 to 0.6.
+            assert!(e.max_element() > 0.5 && e.max_element() < 330_000.0, "seed {seed} {}: {e}", m.name);
+            // In the frame, in front of the camera.
+            let c = m.positions.iter().fold(Vec3::ZERO, |a, p| a + *p) / m.positions.len() as f32;
+            let d = c - scene.camera.origin;
+            let depth = d.dot(forward);
+            assert!(depth > 0.0, "seed {seed} {}: behind the camera", m.name);
+            let (x, y) = (d.dot(right) / depth, d.dot(up) / depth);
+            assert!(x.abs() < reach && y.abs() < reach, "seed {seed} {}: ({x}, {y}) out of ±{reach}", m.name);
+            match m.analytic.as_ref().map(|a| a.kind) {
+                Some(ShapeKind::Sphere) => spheres += 1,
+                Some(ShapeKind::Disk) => {
+                    // A disk emits from its front, which faces the camera.
+                    disks += 1;
+                    let [a, b, k] = m.indices[0].map(|i| m.positions[i as usize]);
+                    let front = (b - a).cross(k - a);
+                    assert!(front.dot(scene.camera.origin - c) > 0.0, "seed {seed} {}: a disk turned away", m.name);
+                }
+                other => panic!("seed {seed} {}: a lamp is a sphere or a disk, not {other:?}", m.name),
+            }
+        }
+        assert!(g.shapes.iter().any(|s| s.id.starts_with("plate")), "seed {seed}: no plate");
+        backdrops += g.shapes.iter().filter(|s| s.id.starts_with("backdrop")).count();
+        skies += usize::from(scene.environment.is_some());
+    }
+    assert!(spheres > 0 && disks > 0, "20 seeds drew {spheres} spherical and {disks} disk lamps");
+    assert!(backdrops > 0 && skies > 0 && backdrops + skies < 20, "{backdrops} backdrops, {skies} skies of 20");
 }
 
 #[test]
