@@ -1178,7 +1178,8 @@ fn noisy_renders_keep_their_own_features() {
 }
 
 /// `hush denoise` without `--model` runs the built-in model for the inputs it has: a `hush render` EXR
-/// carries albedo and normal layers, so hush's shipped `hush_alb_nrm`; a color-only EXR gets OIDN's `rt_hdr`.
+/// carries albedo and normal layers, so hush's shipped `hush_alb_nrm`; a color-only EXR gets `hush_color`;
+/// color and albedo, which no shipped model takes, OIDN's `rt_hdr_alb`.
 #[test]
 fn denoise_without_a_model_uses_the_default_for_its_inputs() {
     let dir = scratch("default-model");
@@ -1397,7 +1398,9 @@ fn denoise_reads_and_writes_pfm() {
     );
     assert!(stderr.contains("model: hush_alb_nrm (shipped)"), "{stderr}");
     assert_eq!(hush_dataset::read_pfm(&from_pfm).unwrap(), hush_dataset::read_rgb(&from_exr).unwrap());
-    // A PFM color carries no feature layers: without the flags the model is color-only.
+    // A PFM color carries no feature layers: without the flags the model is the color-only one, and without a
+    // variance it says that the low band was not restored.
     let stderr = expect_success(&["denoise", "--color", c, "--out", s(&from_pfm)]);
-    assert!(stderr.contains("model: oidn-2.5.1 rt_hdr "), "{stderr}");
+    assert!(stderr.contains("model: hush_color (shipped)"), "{stderr}");
+    assert!(stderr.contains("low band was not restored"), "{stderr}");
 }
