@@ -671,10 +671,7 @@ impl<'a> Gen<'a> {
     fn rectangle(&mut self, name: &str, c: Vec3, [u, v]: [Vec3; 2], facing: Vec3, bsdf: &Bsdf, emission: Option<Vec3>) {
         let v = if u.cross(v).dot(facing) < 0.0 { -v } else { v };
         let n = u.cross(v).normalize();
-        let m = [[u.x, v.x, n.x, c.x], [u.y, v.y, n.y, c.y], [u.z, v.z, n.z, c.z], [0.0, 0.0, 0.0, 1.0]];
-        let values: Vec<String> = m.iter().flatten().map(|x| num(*x)).collect();
-        let t = format!("<matrix value=\"{}\"/>", values.join(" "));
-        self.shape("rectangle", name, &t, bsdf, "", emission);
+        self.shape("rectangle", name, &basis_matrix(u, v, n, c), bsdf, "", emission);
     }
 
     /// `scale`, then a turn about +y by `angle` degrees, then `translate`.
@@ -1107,11 +1104,8 @@ impl<'a> Gen<'a> {
                 let n = (self.camera - c).normalize();
                 let u = n.cross(Vec3::Y).normalize() * radius;
                 let v = n.cross(u).normalize() * radius;
-                let m = [[u.x, v.x, n.x, c.x], [u.y, v.y, n.y, c.y], [u.z, v.z, n.z, c.z], [0.0, 0.0, 0.0, 1.0]];
-                let values: Vec<String> = m.iter().flatten().map(|x| num(*x)).collect();
                 let black = self.black();
-                let t = format!("<matrix value=\"{}\"/>", values.join(" "));
-                self.shape("disk", "lamp", &t, &black, "", Some(radiance));
+                self.shape("disk", "lamp", &basis_matrix(u, v, n, c), &black, "", Some(radiance));
                 self.lights.push(LightKind::SmallArea);
             }
             centres.push(c);
@@ -1197,6 +1191,13 @@ impl<'a> Gen<'a> {
             self.lights.push(LightKind::EnvMap);
         }
     }
+}
+
+/// A `<matrix>` taking the object's x, y and z axes to `u`, `v` and `n` and its origin to `c`.
+fn basis_matrix(u: Vec3, v: Vec3, n: Vec3, c: Vec3) -> String {
+    let m = [[u.x, v.x, n.x, c.x], [u.y, v.y, n.y, c.y], [u.z, v.z, n.z, c.z], [0.0, 0.0, 0.0, 1.0]];
+    let values: Vec<String> = m.iter().flatten().map(|x| num(*x)).collect();
+    format!("<matrix value=\"{}\"/>", values.join(" "))
 }
 
 /// base^u for base > 0 and u in [0, 1): a product of base^(2^-k) over the bits of u (square roots are exact
