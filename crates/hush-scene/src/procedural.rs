@@ -528,6 +528,16 @@ impl<'a> Gen<'a> {
         self.bsdf("diffuse", MaterialClass::Diffuse, &p, true)
     }
 
+    /// A GGX `roughconductor` of a named metal.
+    fn rough_conductor(&mut self, metal: &str, alpha: f32) -> Bsdf {
+        let p = format!(
+            "<string name=\"material\" value=\"{metal}\"/><float name=\"alpha\" value=\"{}\"/>\
+             <string name=\"distribution\" value=\"ggx\"/>",
+            num(alpha)
+        );
+        self.bsdf("roughconductor", MaterialClass::Glossy, &p, true)
+    }
+
     /// A diffuse surface with a generated texture (checks, stripes or tiles of two colors).
     fn textured(&mut self, a: Vec3, b: Vec3) -> Bsdf {
         let file = format!("texture{}.png", self.assets.len());
@@ -577,12 +587,7 @@ impl<'a> Gen<'a> {
             1 => {
                 let metal = ["Au", "Cu", "Al", "Ag", "Cr"][self.rng.below(5)];
                 let alpha = self.rng.range(0.03, 0.4);
-                let p = format!(
-                    "<string name=\"material\" value=\"{metal}\"/><float name=\"alpha\" value=\"{}\"/>\
-                     <string name=\"distribution\" value=\"ggx\"/>",
-                    num(alpha)
-                );
-                self.bsdf("roughconductor", MaterialClass::Glossy, &p, true)
+                self.rough_conductor(metal, alpha)
             }
             k @ (2 | 3) => {
                 let c = self.rng.color(lo, hi);
@@ -1124,19 +1129,14 @@ impl<'a> Gen<'a> {
             let alpha = 0.01 * pow_exact(30.0, self.rng.unit());
             let p_bsdf = if self.rng.chance(0.6) {
                 let metal = ["Al", "Ag", "Cu", "Au", "Cr"][self.rng.below(5)];
-                let params = format!(
-                    "<string name=\"material\" value=\"{metal}\"/><float name=\"alpha\" value=\"{}\"/>\
-                     <string name=\"distribution\" value=\"ggx\"/>",
-                    num(alpha)
-                );
-                self.bsdf("roughconductor", MaterialClass::Glossy, &params, true)
+                self.rough_conductor(metal, alpha)
             } else if self.options.ingredients.rough_plastic {
                 let c = self.rng.color(0.02, 0.3);
                 let params = format!(
                     "<rgb name=\"diffuse_reflectance\" value=\"{}\"/><float name=\"alpha\" value=\"{}\"/>\
                      <string name=\"distribution\" value=\"ggx\"/>",
                     v3(c),
-                    num(alpha.max(0.01))
+                    num(alpha)
                 );
                 self.bsdf("roughplastic", MaterialClass::Glossy, &params, true)
             } else {
