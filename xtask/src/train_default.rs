@@ -13,9 +13,9 @@
 //! when its card shows it beating official OIDN on the held-out scenes on average with every guard holding as
 //! `hush denoise` runs it. `hush_alb_nrm` also meets the issue's bar for its features (+0.5 dB on average at
 //! 4–64 spp, no case there below −0.3 dB); `hush_color` meets the average, not the worst case (its card).
-//! The shipped `hush_alb_nrm` was made before the lamps scenes joined the dataset (its card has the commands
-//! of that commit); with them this command's `hush_alb_nrm` is a candidate whose worst case misses the bar
-//! (docs/results/train-default/README.md), so it is not committed.
+//! One dataset serves both: `hush_alb_nrm` leaves the lamps scenes out (`hush train --exclude 'lamps-*'`), as
+//! the shipped model was trained before they joined; trained with them it is a candidate whose worst case
+//! misses the bar (docs/results/train-default/README.md).
 
 use std::path::Path;
 use std::process::Command;
@@ -147,6 +147,9 @@ struct Shipped {
     init: &'static str,
     /// OIDN's name for the architecture of [`Self::init`].
     arch: &'static str,
+    /// The generated styles of [`GENERATED`] this model does not train on (`hush train --exclude
+    /// <style>-*`; their validation scenes leave the split too), so that one dataset serves both models.
+    leaves_out: &'static [&'static str],
 }
 
 /// The shipped models. Color + albedo + normal starts from OIDN's `unet_large` (`rt_hdr_calb_cnrm_large`,
@@ -164,6 +167,11 @@ const MODELS: [Shipped; 2] = [
         oidn: "rt_hdr_alb_nrm",
         init: "rt_hdr_calb_cnrm_large",
         arch: "unet_large",
+        // Trained with the lamps scenes (the same recipe, 2000 steps) it was the better model on validation
+        // (+0.878 dB against +0.371 on the five scenes) and the worse on the test scenes (+0.67 against
+        // +0.82 at 4–64 spp, worst case −0.37 against −0.06), missing the issue's bar (no case below −0.3):
+        // the shipped model is the one trained without them, which this reproduces.
+        leaves_out: &["lamps"],
     },
     Shipped {
         name: "hush_color",
@@ -172,6 +180,7 @@ const MODELS: [Shipped; 2] = [
         oidn: "rt_hdr",
         init: "rt_hdr",
         arch: "unet",
+        leaves_out: &[],
     },
 ];
 
@@ -179,6 +188,21 @@ impl Shipped {
     /// The weights fine-tuning starts from, as a path relative to the workspace.
     fn init_path(&self) -> String {
         format!("data/weights/oidn-2.5.1/{}.tza", self.init)
+    }
+
+    /// Whether `scene` is of a generated style this model leaves out.
+    fn leaves_out(&self, scene: &str) -> bool {
+        self.leaves_out.iter().any(|style| scene.strip_prefix(style).is_some_and(|rest| rest.starts_with('-')))
+    }
+
+    /// The validation scenes of this model: [`VALIDATION`] but those of the styles it leaves out.
+    fn validation(&self) -> Vec<&'static str> {
+        VALIDATION.into_iter().filter(|s| !self.leaves_out(s)).collect()
+    }
+
+    /// `hush train --exclude`'s patterns (empty: nothing left out).
+    fn exclude(&self) -> Vec<String> {
+        self.leaves_out.iter().map(|style| format!("{style}-*")).collect()
     }
 
     /// The starting weights when they are not the official weights `hush eval` shows anyway.
@@ -257,7 +281,7 @@ pub fn run(args: &[String]) -> Result<()> {
         let with_extra = |models: &[std::path::PathBuf]| [models, extra.as_slice()].concat();
         spawn(
             eval_command(&hush, &dataset, &with_extra(&blends), &validation_dir)
-                .args(["--scenes", &VALIDATION.join(",")]),
+                .args(["--scenes", &model.validation().join(",")]),
         )?;
         let validation = BLEND
             .iter()
@@ -281,7 +305,7 @@ pub fn run(args: &[String]) -> Result<()> {
         let shipped_dir = dir.join(format!("eval-{}-as-shipped", model.name));
         spawn(eval_command(&hush, &dataset, std::slice::from_ref(&trained), &shipped_dir).args(SHIPPED_INFERENCE))?;
         let shipped_rows = held_out_rows(&shipped_dir, &format!("{}/{}", model.name, blend_stem(t)), &oidn_method)?;
-        let facts = RunFacts::read(&dataset, &run_dir, Choice { t, validation })?;
+        let facts = RunFacts::read(&dataset, &run_dir, model, Choice { t, validation })?;
         let mut card =
             model_card(model, &shown, &manifest_hash, (&rows, extra_rows.as_deref()), &timing, &facts, dataset_seconds);
         card.push_str(&as_shipped(&shipped_rows));
@@ -412,7 +436,8 @@ fn train_command(hush: &Path, dataset: &Path, run: &Path, model: &Shipped, steps
     ]
     .iter()
     .map(|s| s.to_string())
-    .chain(["--validation".to_string(), VALIDATION.join(",")])
+    .chain(["--validation".to_string(), model.validation().join(",")])
+    .chain(model.exclude().into_iter().flat_map(|p| ["--exclude".to_string(), p]))
     .chain(["--steps".to_string(), steps.to_string()])
     .collect();
     let mut cmd = Command::new(hush);
@@ -421,7 +446,12 @@ fn train_command(hush: &Path, dataset: &Path, run: &Path, model: &Shipped, steps
     let shown = format!(
         "hush train --init {} {} --dataset target/train-default/dataset --out target/train-default/{}",
         model.init_path(),
-        args[1..].join(" "),
+        // A pattern quoted, as a shell would glob it.
+        args[1..]
+            .iter()
+            .map(|a| if a.contains('*') { format!("'{a}'") } else { a.clone() })
+            .collect::<Vec<_>>()
+            .join(" "),
         model.name
     );
     (cmd, shown)
@@ -521,13 +551,16 @@ struct RunFacts {
 }
 
 impl RunFacts {
-    fn read(dataset: &Path, run_dir: &Path, choice: Choice) -> Result<RunFacts> {
+    fn read(dataset: &Path, run_dir: &Path, model: &Shipped, choice: Choice) -> Result<RunFacts> {
         let manifest = read_json(&dataset.join("manifest.json"))?;
         let mut train_scenes: Vec<String> = manifest["config"]["scenes"]
             .as_array()
             .into_iter()
             .flatten()
-            .filter(|s| s["split"] == "train" && !VALIDATION.contains(&s["name"].as_str().unwrap_or("")))
+            .filter(|s| {
+                let name = s["name"].as_str().unwrap_or("");
+                s["split"] == "train" && !model.validation().contains(&name) && !model.leaves_out(name)
+            })
             .filter_map(|s| s["name"].as_str().map(String::from))
             .collect();
         train_scenes.sort();
@@ -553,7 +586,7 @@ fn model_card(
             "The validation loss (the training loss, {LOSS} in the {LOSS_SPACE} space, on whole images of {val}) was {initial:.5} for OIDN's weights before \
              any step, lowest ({best:.5}) at epoch {epoch}; the fine-tuned weights are the run's last \
              (`model.safetensors`).",
-            val = VALIDATION.join(", ")
+            val = model.validation().join(", ")
         ),
         _ => "The run recorded no validation losses.".into(),
     };
@@ -606,8 +639,8 @@ fn model_card(
         dataset = DATASET_ARGS.join(" "),
         count = facts.train_scenes.len(),
         train = facts.train_scenes.join(", "),
-        val = VALIDATION.join(", "),
-        val_arg = VALIDATION.join(","),
+        val = model.validation().join(", "),
+        val_arg = model.validation().join(","),
         blend_list = BLEND.map(|t| format!("{t:.2}")).join(", "),
         chosen = blend_stem(facts.choice.t),
         arch = model.arch,
@@ -722,5 +755,24 @@ mod tests {
         assert!(text.contains("+0.50 dB over official OIDN on average"), "{text}");
         assert!(text.contains("2 of 3 cases hold; failing: a_v000 at 256 spp: flip 0.0212"), "{text}");
         assert!(as_shipped(&cases[..2]).contains("2 of 2 cases hold.\n"));
+    }
+
+    /// `hush_alb_nrm` neither trains nor validates on the lamps scenes, `hush_color` does both; the command
+    /// shows the pattern quoted.
+    #[test]
+    fn each_model_has_its_scene_set() {
+        let [alb_nrm, color] = &MODELS;
+        assert_eq!(alb_nrm.validation(), ["proc-1-11", "proc-1-12", "open-12", "open-24"]);
+        assert_eq!(alb_nrm.exclude(), ["lamps-*"]);
+        assert!(alb_nrm.leaves_out("lamps-3") && !alb_nrm.leaves_out("lampshade-1") && !alb_nrm.leaves_out("open-3"));
+        assert_eq!(color.validation(), VALIDATION);
+        assert!(color.exclude().is_empty() && !color.leaves_out("lamps-3"));
+        let (_, shown) = train_command(Path::new("hush"), Path::new("d"), Path::new("r"), alb_nrm, 10);
+        assert!(
+            shown.contains("--validation proc-1-11,proc-1-12,open-12,open-24 --exclude 'lamps-*' --steps 10"),
+            "{shown}"
+        );
+        let (_, shown) = train_command(Path::new("hush"), Path::new("d"), Path::new("r"), color, 10);
+        assert!(shown.contains("--validation proc-1-11,proc-1-12,open-12,open-24,lamps-12 --steps 10"), "{shown}");
     }
 }

@@ -152,6 +152,9 @@ pub fn incompatibilities(stored: &RunConfig, now: &RunConfig) -> Vec<String> {
     if stored.validation != now.validation {
         out.push(format!("validation: {:?} in the run, {:?} now", stored.validation, now.validation));
     }
+    if stored.exclude != now.exclude {
+        out.push(format!("exclude: {:?} in the run, {:?} now", stored.exclude, now.exclude));
+    }
     if stored.spp != now.spp {
         out.push(format!("spp: {:?} in the run, {:?} now", stored.spp, now.spp));
     }
@@ -211,6 +214,7 @@ mod tests {
             device: "cpu".into(),
             aux: hush_dataset::AuxSource::Noisy,
             validation: vec![],
+            exclude: vec![],
             train,
         }
     }

@@ -24,25 +24,38 @@ use crate::Observer;
 use folder::{name_batch, save_epoch, write_file};
 use samples::{Role, load_split};
 
-/// The training split's views without those of the `validation` scenes, and those: an unknown name, or one
-/// of a test scene, is an error that lists the training scenes.
-fn split_validation<'m>(
+/// Whether scene `name` is named by `pattern`: the same name, or a `prefix*` it starts with.
+fn names(pattern: &str, name: &str) -> bool {
+    match pattern.strip_suffix('*') {
+        Some(prefix) => name.starts_with(prefix),
+        None => pattern == name,
+    }
+}
+
+/// The training split's views without those of the `validation` scenes and of the `exclude`d ones (names or
+/// `prefix*` patterns), and the validation scenes' views: a name or pattern that no training scene answers
+/// (an unknown name, or one of a test scene), or a scene both validated and excluded, is an error that lists
+/// the training scenes.
+fn split_scenes<'m>(
     manifest: &'m Manifest,
     validation: &[String],
+    exclude: &[String],
     dataset: &std::path::Path,
 ) -> Result<(Vec<&'m hush_dataset::ViewRecord>, Vec<&'m hush_dataset::ViewRecord>)> {
-    let (held, train): (Vec<_>, Vec<_>) = manifest.split(Split::Train).partition(|v| validation.contains(&v.scene));
-    for name in validation {
-        if !held.iter().any(|v| &v.scene == name) {
-            let mut scenes: Vec<&str> = manifest.split(Split::Train).map(|v| v.scene.as_str()).collect();
-            scenes.dedup();
-            bail!(
-                "--validation {name}: no training scene of {} has that name; choose among {}",
-                dataset.display(),
-                scenes.join(", ")
-            );
+    let mut scenes: Vec<&str> = manifest.split(Split::Train).map(|v| v.scene.as_str()).collect();
+    scenes.dedup();
+    let listed = || scenes.join(", ");
+    for (flag, patterns) in [("validation", validation), ("exclude", exclude)] {
+        if let Some(p) = patterns.iter().find(|p| !scenes.iter().any(|s| names(p, s))) {
+            bail!("--{flag} {p}: no training scene of {} has that name; choose among {}", dataset.display(), listed());
         }
     }
+    let named = |patterns: &[String], scene: &str| patterns.iter().any(|p| names(p, scene));
+    if let Some(s) = scenes.iter().find(|s| named(validation, s) && named(exclude, s)) {
+        bail!("--validation and --exclude both name {s}: a scene is either validated on or left out");
+    }
+    let (held, train): (Vec<_>, Vec<_>) =
+        manifest.split(Split::Train).filter(|v| !named(exclude, &v.scene)).partition(|v| named(validation, &v.scene));
     Ok((train, held))
 }
 
@@ -93,11 +106,21 @@ pub fn run(options: TrainOptions, observer: &dyn Observer) -> Result<TrainOutcom
     let manifest = Manifest::load(&dataset)?;
     let spp = args.spp.clone().or(base.map(|c| c.spp.clone())).unwrap_or_default();
     let validation = args.validation.clone().or(base.map(|c| c.validation.clone())).unwrap_or_default();
-    let (train_views, validation_views) = split_validation(&manifest, &validation, &dataset)?;
+    let exclude = args.exclude.clone().or(base.map(|c| c.exclude.clone())).unwrap_or_default();
+    let (train_views, validation_views) = split_scenes(&manifest, &validation, &exclude, &dataset)?;
     let train_images = train_views
         .iter()
         .map(|v| v.noisy.iter().filter(|r| spp.is_empty() || spp.contains(&r.spp)).count())
         .sum::<usize>();
+    if train_views.is_empty() {
+        bail!(
+            "{}: no training images are left once the validation scenes ({}) and the excluded ones ({}) are set \
+             aside; validate on or leave out fewer scenes",
+            dataset.display(),
+            validation.join(", "),
+            exclude.join(", ")
+        );
+    }
     if train_images == 0 {
         bail!("{} has no training images at spp {spp:?}", dataset.display());
     }
@@ -183,6 +206,9 @@ pub fn run(options: TrainOptions, observer: &dyn Observer) -> Result<TrainOutcom
 
     let t = &cfg.train;
     let epochs = t.steps.div_ceil(t.epoch_steps);
+    if !cfg.exclude.is_empty() {
+        observer.note(&format!("leaving out the training scenes {}", cfg.exclude.join(", ")));
+    }
     observer.note(&format!(
         "training on {} images, {measured} on {} (ready in {load_seconds:.2} s), with {} ({} auxiliary images): {} \
          steps = {epochs} epochs of {} steps",

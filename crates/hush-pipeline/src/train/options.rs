@@ -66,6 +66,10 @@ pub struct TrainOptions {
     /// loss, best.safetensors and the choice of a run's length, and the dataset's test split is not read.
     #[cfg_attr(feature = "clap", arg(long, value_delimiter = ','))]
     pub validation: Option<Vec<String>>,
+    /// Training scenes (by name; `prefix*` for every scene whose name starts so) that the run leaves out: not
+    /// trained on, not validated on. One dataset then serves models trained on different scene sets.
+    #[cfg_attr(feature = "clap", arg(long, value_delimiter = ','))]
+    pub exclude: Option<Vec<String>>,
     /// Run folder: config.json, loss.csv, metrics.csv, checkpoints/, best.safetensors, model.safetensors.
     #[cfg_attr(feature = "clap", arg(long))]
     pub out: Option<PathBuf>,
@@ -174,6 +178,9 @@ pub struct RunConfig {
     /// Training scenes held out as the validation split (empty: the test loss is the test split's).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub validation: Vec<String>,
+    /// Training scenes (names or `prefix*` patterns) the run leaves out (empty: none).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub exclude: Vec<String>,
     pub train: TrainConfig,
 }
 
@@ -197,6 +204,7 @@ impl TrainOptions {
             aux,
             dataset,
             validation,
+            exclude,
             out,
             features,
             spp,
@@ -536,7 +544,8 @@ pub fn resolve_with_init(
         None => base.map_or(AuxSource::default(), |c| c.aux),
     };
     let validation = args.validation.clone().or(base.map(|c| c.validation.clone())).unwrap_or_default();
-    Ok((RunConfig { dataset, spp, device, aux, validation, train }, init.map(|(weights, _)| weights)))
+    let exclude = args.exclude.clone().or(base.map(|c| c.exclude.clone())).unwrap_or_default();
+    Ok((RunConfig { dataset, spp, device, aux, validation, exclude, train }, init.map(|(weights, _)| weights)))
 }
 
 #[cfg(test)]
