@@ -594,9 +594,8 @@ fn split_views_holds_out_each_scenes_last_views() {
     let err = expect_error(&args.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(err.contains("--exclude cbox-*") && err.contains("blue-box, cbox"), "{err}");
     // The test split is measured when nothing is validated; the run records what it left out.
-    let args: Vec<String> =
+    let mut args: Vec<String> =
         train("blue-box", &excluded).into_iter().filter(|a| a != "--validation" && a != "blue-box").collect();
-    let mut args = args;
     args.extend(["--exclude".into(), "blue*".into()]);
     let log = expect_success(&args.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(
