@@ -538,6 +538,17 @@ impl<'a> Gen<'a> {
         self.bsdf("roughconductor", MaterialClass::Glossy, &p, true)
     }
 
+    /// A GGX `roughplastic` of diffuse colour `c` (with Mitsuba's interior IOR unless `ior` is given).
+    fn rough_plastic(&mut self, c: Vec3, ior: Option<f32>, alpha: f32) -> Bsdf {
+        let mut p = format!("<rgb name=\"diffuse_reflectance\" value=\"{}\"/>", v3(c));
+        if let Some(ior) = ior {
+            let _ = write!(p, "<float name=\"int_ior\" value=\"{}\"/>", num(ior));
+        }
+        let _ =
+            write!(p, "<float name=\"alpha\" value=\"{}\"/><string name=\"distribution\" value=\"ggx\"/>", num(alpha));
+        self.bsdf("roughplastic", MaterialClass::Glossy, &p, true)
+    }
+
     /// A diffuse surface with a generated texture (checks, stripes or tiles of two colors).
     fn textured(&mut self, a: Vec3, b: Vec3) -> Bsdf {
         let file = format!("texture{}.png", self.assets.len());
@@ -591,20 +602,16 @@ impl<'a> Gen<'a> {
             }
             k @ (2 | 3) => {
                 let c = self.rng.color(lo, hi);
-                let mut p = format!(
-                    "<rgb name=\"diffuse_reflectance\" value=\"{}\"/><float name=\"int_ior\" value=\"{}\"/>",
-                    v3(c),
-                    num(self.rng.range(1.4, 1.6))
-                );
+                let ior = self.rng.range(1.4, 1.6);
                 if k == 3 {
                     let alpha = self.rng.range(0.05, 0.4);
-                    let _ = write!(
-                        p,
-                        "<float name=\"alpha\" value=\"{}\"/><string name=\"distribution\" value=\"ggx\"/>",
-                        num(alpha)
-                    );
-                    self.bsdf("roughplastic", MaterialClass::Glossy, &p, true)
+                    self.rough_plastic(c, Some(ior), alpha)
                 } else {
+                    let p = format!(
+                        "<rgb name=\"diffuse_reflectance\" value=\"{}\"/><float name=\"int_ior\" value=\"{}\"/>",
+                        v3(c),
+                        num(ior)
+                    );
                     self.bsdf("plastic", MaterialClass::Glossy, &p, true)
                 }
             }
@@ -1132,13 +1139,7 @@ impl<'a> Gen<'a> {
                 self.rough_conductor(metal, alpha)
             } else if self.options.ingredients.rough_plastic {
                 let c = self.rng.color(0.02, 0.3);
-                let params = format!(
-                    "<rgb name=\"diffuse_reflectance\" value=\"{}\"/><float name=\"alpha\" value=\"{}\"/>\
-                     <string name=\"distribution\" value=\"ggx\"/>",
-                    v3(c),
-                    num(alpha)
-                );
-                self.bsdf("roughplastic", MaterialClass::Glossy, &params, true)
+                self.rough_plastic(c, None, alpha)
             } else {
                 self.random_material(0.0)
             };
