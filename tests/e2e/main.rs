@@ -1459,10 +1459,11 @@ fn shipped_models_hold_the_guards_on_a_held_out_scene() {
         // The color alone, with the render's variance beside it (which --keep-exact and the restored low band
         // read; it is no input of the network).
         let exr = hush_dataset::read_exr(&render).unwrap();
+        let color = exr.layer("").unwrap();
         let (color_only, variance) = (dir.join(format!("color-{spp}.exr")), dir.join(format!("variance-{spp}.exr")));
-        hush_dataset::write_rgb(&color_only, &exr.layer("").unwrap()).unwrap();
+        hush_dataset::write_rgb(&color_only, &color).unwrap();
         hush_dataset::write_rgb(&variance, &exr.layer("variance").unwrap()).unwrap();
-        let noisy = hush_eval::compare(&exr.layer("").unwrap(), &reference).unwrap();
+        let noisy = hush_eval::compare(&color, &reference).unwrap();
         let color_only = ["--color", s(&color_only), "--variance", s(&variance)];
         for (input, model) in [(&["--color", s(&render)][..], "hush_alb_nrm"), (&color_only[..], "hush_color")] {
             let out = dir.join(format!("{model}-{spp}.exr"));
