@@ -51,8 +51,8 @@ pub const DEFAULTS: [ShippedModel; 2] = [
         name: "hush_alb_nrm",
         aux: &[Feature::Albedo, Feature::Normal],
         bytes: include_bytes!("../../../data/models/hush_alb_nrm.safetensors"),
-        // Every guard on the test scenes holds in 8 poses with the low band at 2 px; with one pose two FLIP
-        // guards at 256 spp fail (docs/results/train-default/README.md).
+        // Every guard on the test scenes holds in 8 poses with the low band at 2 px; with one pose three FLIP
+        // guards at 256 spp fail (data/models/hush_alb_nrm.md).
         inference: Inference { poses: 8, restore_low_band: Some(2.0) },
     },
     ShippedModel {
