@@ -1204,6 +1204,46 @@ fn noisy_renders_keep_their_own_features() {
     assert!(err.contains("aux: clean in the run, noisy now"), "{err}");
 }
 
+/// A dataset records each image's pixel sampler: one rendered with independent positions (hush's only
+/// sampler before stratification; such manifests carry no `pixel_sampler`) is rendered again, every image of
+/// it, by a run with the default stratified positions, which records them; a third run keeps them all.
+#[test]
+fn a_dataset_renders_again_what_another_pixel_sampler_rendered() {
+    let ds = scratch("pixel-sampler").join("ds");
+    let args = cbox_dataset_args(&ds, "1", "2,4");
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let stderr = expect_success(&[&args[..], &["--pixel-sampler", "independent"]].concat());
+    assert!(stderr.contains("4 images rendered"), "2 noisy renders, the features and the reference: {stderr}");
+    let samplers = |ds: &Path| {
+        let manifest = manifest_of(ds);
+        let view = &manifest["views"][0];
+        let mut all: Vec<serde_json::Value> =
+            view["noisy"].as_array().unwrap().iter().map(|r| r["pixel_sampler"].clone()).collect();
+        all.extend([view["aux"]["pixel_sampler"].clone(), view["reference"]["pixel_sampler"].clone()]);
+        all
+    };
+    assert!(
+        samplers(&ds).iter().all(|s| s.is_null()),
+        "independent renders are recorded as before: {:?}",
+        samplers(&ds)
+    );
+    let independent = std::fs::read(ds.join("cbox_v000_000004.hdr.exr")).unwrap();
+    let stderr = expect_success(&args);
+    assert!(stderr.contains("4 images rendered"), "every image again: {stderr}");
+    assert!(samplers(&ds).iter().all(|s| s == "stratified"), "{:?}", samplers(&ds));
+    assert_ne!(
+        std::fs::read(ds.join("cbox_v000_000004.hdr.exr")).unwrap(),
+        independent,
+        "another sampler, another image"
+    );
+    let stderr = expect_success(&args);
+    assert!(stderr.contains("0 images rendered"), "all kept: {stderr}");
+    let out = hush(&[&args[..], &["--pixel-sampler", "sobol"]].concat());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "a usage error: {err}");
+    assert!(err.contains("unknown pixel sampler 'sobol' (stratified or independent)"), "{err}");
+}
+
 /// `hush denoise` without `--model` runs the built-in model for the inputs it has: a `hush render` EXR
 /// carries albedo and normal layers, so hush's shipped `hush_alb_nrm`; a color-only EXR gets `hush_color`;
 /// color and albedo, which no shipped model takes, OIDN's `rt_hdr_alb`.

@@ -49,6 +49,11 @@ pub struct RenderRecord {
     /// `<scene>_<view>_<spp>.var.exr`. `None` for renders from before it was stored, which are kept.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub variance: Option<String>,
+    /// Where its pixels' samples lay: `stratified` (hush's default since it has one); `None` for
+    /// independent positions, every render from before stratification. A resume renders again what differs
+    /// from the run's sampler.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pixel_sampler: Option<String>,
 }
 
 /// The four auxiliary images of one render.
@@ -91,6 +96,11 @@ pub struct AuxRecord {
     pub max_depth: Option<u32>,
     #[serde(flatten)]
     pub files: AuxFiles,
+    /// Where its pixels' samples lay: `stratified` (hush's default since it has one); `None` for
+    /// independent positions, every render from before stratification. A resume renders again what differs
+    /// from the run's sampler.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pixel_sampler: Option<String>,
 }
 
 impl AuxRecord {
@@ -134,6 +144,11 @@ pub struct ReferenceRecord {
     pub firefly: FireflyRecord,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub check: Option<ReferenceCheck>,
+    /// Where its pixels' samples lay: `stratified` (hush's default since it has one); `None` for
+    /// independent positions, every render from before stratification. A resume renders again what differs
+    /// from the run's sampler.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pixel_sampler: Option<String>,
 }
 
 /// How a view's camera was chosen.
@@ -287,6 +302,9 @@ pub struct DatasetConfig {
     /// The procedural scenes the run generated (`--procedural N`), if any.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub procedural: Option<ProceduralRecord>,
+    /// The pixel sampler of the run's renders (`stratified`); `None`: independent positions.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pixel_sampler: Option<String>,
 }
 
 /// Procedural scenes generated for a dataset: enough to generate the same scenes again.

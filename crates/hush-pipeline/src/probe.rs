@@ -4,7 +4,7 @@
 use anyhow::Result;
 use hush_dataset::luminance;
 use hush_scene::{Film, Scene};
-use hush_trace::{RenderSettings, Renderer};
+use hush_trace::{PixelSampler, RenderSettings, Renderer};
 
 /// A candidate (view or scene) is kept when at least this fraction of its probe pixels receives light.
 pub const MIN_LIT_FRACTION: f64 = 0.5;
@@ -32,7 +32,10 @@ pub fn probe_size(film: &Film) -> (u32, u32) {
 pub fn lit_fraction(renderer: &Renderer, scene: &Scene, seed: u64) -> Result<f64> {
     let mut probe = scene.clone();
     (probe.film.width, probe.film.height) = probe_size(&scene.film);
-    let out = renderer.render(&probe, &RenderSettings { spp: PROBE_SPP, seed }, &mut |_, _| {})?;
+    // Independent positions, as before stratification existed: which cameras and generated scenes a probe
+    // accepts stays what it was.
+    let settings = RenderSettings { spp: PROBE_SPP, seed, pixel_sampler: PixelSampler::Independent };
+    let out = renderer.render(&probe, &settings, &mut |_, _| {})?;
     let lit = out.color.data.chunks_exact(3).filter(|p| luminance(p) > 0.0).count();
     Ok(lit as f64 / (probe.film.width as f64 * probe.film.height as f64))
 }

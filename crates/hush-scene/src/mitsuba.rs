@@ -614,7 +614,13 @@ impl Parser<'_, '_> {
     fn sampler(&mut self, node: Node) -> Result<Option<u32>, SceneError> {
         let ty = self.attr(node, "type")?;
         if ty != "independent" {
-            self.warn(node, format!("sampler '{ty}' is not supported yet: hush samples independently"));
+            self.warn(
+                node,
+                format!(
+                    "sampler '{ty}' is not supported: hush stratifies each pixel's sample positions (a scrambled \
+                     (0, 2)-sequence) and draws everything else independently"
+                ),
+            );
         }
         let mut spp = None;
         for child in elements(node) {

@@ -10,7 +10,7 @@
 //! let scene = hush_scene::Scene::load("scene.xml".as_ref())?;
 //! let gpu = GpuContext::new()?;
 //! eprintln!("rendering on {}", gpu.describe());
-//! let out = Renderer::new(&gpu)?.render(&scene, &RenderSettings { spp: 16, seed: 7 }, &mut |_, _| {})?;
+//! let out = Renderer::new(&gpu)?.render(&scene, &RenderSettings::new(16, 7), &mut |_, _| {})?;
 //! assert_eq!(out.color.channels, 3);
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
@@ -25,7 +25,9 @@ mod upload;
 mod wide;
 
 pub use gpu::{GpuContext, INSTALL_HINT};
-pub use render::{KERNEL_SOURCE, MAX_CACHED_KERNELS, RenderOutput, RenderSettings, Renderer, kernel_source};
+pub use render::{
+    KERNEL_SOURCE, MAX_CACHED_KERNELS, PixelSampler, RenderOutput, RenderSettings, Renderer, kernel_source,
+};
 pub use scan::SceneLiterals;
 pub use upload::{FLAT_SCAN_MAX_TRIANGLES, KernelFeatures, flat_scan_cost};
 

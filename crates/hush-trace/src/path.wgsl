@@ -26,7 +26,12 @@ struct Params {
     // standard deviation), in pixels.
     filter_kind: u32,
     filter_width: f32,
+    // PIXEL_STRATIFIED (`pixel_point`) or PIXEL_INDEPENDENT (two numbers of the path's stream).
+    pixel_sampler: u32,
 }
+
+const PIXEL_STRATIFIED: u32 = 0u;
+const PIXEL_INDEPENDENT: u32 = 1u;
 
 const FILTER_BOX: u32 = 0u;
 const FILTER_TENT: u32 = 1u;
@@ -100,6 +105,27 @@ fn pcg(v: u32) -> u32 {
 fn rand() -> f32 {
     rng_state = pcg(rng_state);
     return f32(rng_state >> 8u) * (1.0 / 16777216.0);
+}
+
+// ---- pixel positions: a scrambled (0, 2)-sequence ----
+
+// The `index`-th point of the base-2 (0, 2)-sequence (van der Corput's radical inverse and Sobol's
+// second dimension), each axis XORed with its own random 32-bit word (a random digital shift).
+// Every prefix of 2^k points has one point in each of the 2^k elementary intervals of the unit
+// square (a 4 × 4 grid at 16 spp, and 1 × 16, 2 × 8, ...), and each point is uniform over the
+// square, so a pixel's estimate stays unbiased while the part of its variance that comes from where
+// in the pixel a sample lies (an edge, an emitter's rim, a texture) falls faster than 1/n.
+fn pixel_point(index: u32, scramble: vec2<u32>) -> vec2<f32> {
+    var y = scramble.y;
+    var v = 0x80000000u;
+    for (var i = index; i != 0u; i >>= 1u) {
+        if (i & 1u) != 0u {
+            y ^= v;
+        }
+        v ^= v >> 1u;
+    }
+    let x = reverseBits(index) ^ scramble.x;
+    return vec2<f32>(f32(x >> 8u), f32(y >> 8u)) * (1.0 / 16777216.0);
 }
 
 // ---- geometry ----
@@ -485,8 +511,16 @@ fn filter_position(u: f32, pixel: u32, size: u32) -> f32 {
 // Seeds the random stream of (pixel, sample index, seed) and starts that sample's camera ray.
 fn start_path(pixel: vec2<u32>, pixel_index: u32, sample_index: u32) -> PathState {
     rng_state = pcg(pixel_index ^ pcg(sample_index ^ pcg(params.seed_lo ^ pcg(params.seed_hi))));
-    // A point drawn from the pixel's filter, separably. Row 0 is the top of the image.
-    let u = vec2<f32>(rand(), rand());
+    // A point drawn from the pixel's filter, separably, from the pixel's sequence (its scramble one
+    // pair of words per pixel and seed, the same for all its samples) or from the path's stream.
+    // Row 0 is the top of the image.
+    var u: vec2<f32>;
+    if params.pixel_sampler == PIXEL_INDEPENDENT {
+        u = vec2<f32>(rand(), rand());
+    } else {
+        let pixel_seed = pcg(pixel_index ^ pcg(params.seed_lo ^ pcg(params.seed_hi ^ 0x9e3779b9u)));
+        u = pixel_point(sample_index, vec2<u32>(pcg(pixel_seed), pcg(pixel_seed ^ 0x85ebca6bu)));
+    }
     let fx = filter_position(u.x, pixel.x, params.width) / f32(params.width);
     let fy = filter_position(u.y, pixel.y, params.height) / f32(params.height);
     let d = normalize(params.forward.xyz + (2.0 * fx - 1.0) * params.right.xyz + (1.0 - 2.0 * fy) * params.up.xyz);

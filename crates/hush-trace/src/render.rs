@@ -76,6 +76,52 @@ pub struct RenderSettings {
     pub spp: u32,
     /// The same seed gives the same image.
     pub seed: u64,
+    /// Where in the pixel's filter each sample's camera ray starts.
+    pub pixel_sampler: PixelSampler,
+}
+
+impl RenderSettings {
+    /// `spp` samples per pixel from `seed`, with the default [`PixelSampler`].
+    pub fn new(spp: u32, seed: u64) -> RenderSettings {
+        RenderSettings { spp, seed, pixel_sampler: PixelSampler::default() }
+    }
+}
+
+/// How a pixel's samples are placed in it (and its filter, by filter importance sampling). Either way each
+/// sample's position is uniform, so the pixel's estimate has the same expectation; every other random number
+/// of a path is independent of its position and of the other samples.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum PixelSampler {
+    /// The pixel's samples are the points of a base-2 (0, 2)-sequence under a random digital shift of the
+    /// pixel's own: any 2^k of them from the first fill the 2^k elementary intervals of the square (a 4 × 4
+    /// grid at 16 spp), so the noise that comes from where in the pixel a sample lies (an edge, an emitter's
+    /// rim, a texture) falls faster than 1/n. Pixels stay independent of each other.
+    #[default]
+    Stratified,
+    /// Each position independent of the others (Mitsuba's `independent` sampler); hush's only sampler before
+    /// [`PixelSampler::Stratified`], which a dataset records.
+    Independent,
+}
+
+impl PixelSampler {
+    /// Every sampler, in the order of [`PixelSampler::name`]'s list.
+    pub const ALL: [PixelSampler; 2] = [PixelSampler::Stratified, PixelSampler::Independent];
+
+    /// Its name on the command line and in a dataset's manifest.
+    pub fn name(self) -> &'static str {
+        match self {
+            PixelSampler::Stratified => "stratified",
+            PixelSampler::Independent => "independent",
+        }
+    }
+
+    /// The sampler of a name ([`PixelSampler::name`]); an error lists the names.
+    pub fn parse(name: &str) -> Result<PixelSampler, String> {
+        PixelSampler::ALL
+            .into_iter()
+            .find(|s| s.name() == name)
+            .ok_or_else(|| format!("unknown pixel sampler '{name}' (stratified or independent)"))
+    }
 }
 
 /// A rendered image and its auxiliary features, all averaged over the pixel's samples.
@@ -129,7 +175,7 @@ struct Params {
     light_count: u32,
     filter_kind: u32,
     filter_width: f32,
-    pad: [u32; 1],
+    pixel_sampler: u32,
 }
 
 /// Compiled kernels on one device: the generic kernel and the specialized ones rendered so far,
@@ -593,7 +639,10 @@ impl<'a> Renderer<'a> {
                 PixelFilter::Tent { radius } => radius,
                 PixelFilter::Gaussian { stddev } => stddev,
             },
-            pad: [0; 1],
+            pixel_sampler: match settings.pixel_sampler {
+                PixelSampler::Stratified => 0,
+                PixelSampler::Independent => 1,
+            },
         };
         let (paths_per_dispatch, max_samples) = match time_limit {
             Some(_) => (PATHS_PER_TIMED_DISPATCH, MAX_SAMPLES_PER_TIMED_DISPATCH),

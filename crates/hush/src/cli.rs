@@ -131,6 +131,10 @@ pub struct RenderArgs {
     /// Random seed: the same seed gives the same image.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Where each pixel's samples lie: stratified (a scrambled (0, 2)-sequence per pixel, the default) or
+    /// independent (as Mitsuba's `independent` sampler, and hush before stratification)
+    #[arg(long, default_value = "stratified", value_parser = parse_pixel_sampler)]
+    pub pixel_sampler: hush_trace::PixelSampler,
     /// Also write an 8-bit sRGB preview of the beauty image.
     #[arg(long)]
     pub png: Option<PathBuf>,
@@ -318,4 +322,9 @@ fn parse_vec3(s: &str) -> Result<[f32; 3], String> {
         Ok(v) if v.len() == 3 && v.iter().all(|x| x.is_finite()) => Ok([v[0], v[1], v[2]]),
         _ => Err(format!("'{s}' is not three finite numbers x,y,z")),
     }
+}
+
+/// `--pixel-sampler`'s value.
+pub fn parse_pixel_sampler(name: &str) -> Result<hush_trace::PixelSampler, String> {
+    hush_trace::PixelSampler::parse(name)
 }

@@ -14,6 +14,7 @@ pub fn record(scene: &str, view: &str, spps: &[u32], size: u32) -> ViewRecord {
         render_seconds: 0.5,
         aux: Some(AuxFiles::from_fn(|kind| Layout::noisy_aux_name(scene, view, spp, kind))),
         variance: None,
+        pixel_sampler: None,
     };
     ViewRecord {
         scene: scene.into(),
@@ -37,6 +38,7 @@ pub fn record(scene: &str, view: &str, spps: &[u32], size: u32) -> ViewRecord {
             supersample: 2,
             firefly: FireflyRecord { factor: 4.0, clamped_pixels: 0, energy_removed: 0.0 },
             check: None,
+            pixel_sampler: None,
         },
         aux: AuxRecord {
             spp: 64,
@@ -44,6 +46,7 @@ pub fn record(scene: &str, view: &str, spps: &[u32], size: u32) -> ViewRecord {
             render_seconds: 0.25,
             max_depth: Some(8),
             files: AuxFiles::from_fn(|kind| Layout::aux_name(scene, view, kind)),
+            pixel_sampler: None,
         },
     }
 }
@@ -205,6 +208,7 @@ fn config(scenes: &[&str], views: u32, spp: &[u32]) -> DatasetConfig {
             .collect(),
         skipped: Vec::new(),
         procedural: None,
+        pixel_sampler: None,
     }
 }
 

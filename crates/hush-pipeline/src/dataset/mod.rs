@@ -12,7 +12,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use hush_dataset::{DatasetConfig, Layout, Manifest, SceneEntry, Split, temp_files, temp_target};
 use hush_scene::procedural::{GeneratorOptions, Ingredients};
-use hush_trace::Renderer;
+use hush_trace::{PixelSampler, Renderer};
 
 pub use scenes::{collect_scene_files, scene_name};
 pub use views::{jitter_camera, render_seed};
@@ -62,6 +62,17 @@ pub struct DatasetPlan {
     pub seed: u64,
     /// Render only shard `i` of `n`.
     pub shard: Option<(u32, u32)>,
+    /// Where each pixel's samples lie; a resume renders again what another sampler rendered.
+    pub pixel_sampler: PixelSampler,
+}
+
+/// How a manifest records `sampler`: by name, except independent positions, which renders from before the
+/// sampler was recorded had (`None`).
+pub(crate) fn sampler_record(sampler: PixelSampler) -> Option<String> {
+    match sampler {
+        PixelSampler::Independent => None,
+        other => Some(other.name().to_string()),
+    }
 }
 
 impl DatasetPlan {
@@ -96,6 +107,7 @@ impl DatasetPlan {
             size: None,
             seed: 0,
             shard: None,
+            pixel_sampler: PixelSampler::default(),
         }
     }
 
@@ -217,6 +229,7 @@ pub fn build(plan: &DatasetPlan, renderer: &Renderer, observer: &dyn Observer) -
             .collect(),
         skipped,
         procedural,
+        pixel_sampler: sampler_record(plan.pixel_sampler),
     };
     let known = Manifest::load_or_default(out)?;
     let (mut own, own_path) = match plan.shard {

@@ -14,8 +14,8 @@ use hush_hash::SplitMix64;
 use hush_scene::{Camera, PixelFilter, Scene};
 use hush_trace::{RenderOutput, RenderSettings, Renderer};
 
-use super::DatasetPlan;
 use super::scenes::JobScene;
+use super::{DatasetPlan, sampler_record};
 use crate::Observer;
 use crate::probe::{MAX_ATTEMPTS, MIN_LIT_FRACTION, PROBE_SEED, PROBE_SPP, lit_fraction, probe_size};
 
@@ -100,7 +100,8 @@ impl Ctx<'_> {
         let mut progress = self.observer.render(label, spp);
         let pixels = scene.film.width as f64 * scene.film.height as f64;
         let start = std::time::Instant::now();
-        let out = self.renderer.render(scene, &RenderSettings { spp, seed }, &mut |done, _| {
+        let settings = RenderSettings { spp, seed, pixel_sampler: self.plan.pixel_sampler };
+        let out = self.renderer.render(scene, &settings, &mut |done, _| {
             let rate = pixels * done as f64 / start.elapsed().as_secs_f64().max(1e-9) / 1e6;
             progress.update(done, rate);
         });
@@ -217,6 +218,7 @@ pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u3
         aux: None,
     };
 
+    let sampler = sampler_record(plan.pixel_sampler);
     let spps = plan.ladder();
     for &spp in &spps {
         let seed = render_seed(plan.seed, name, v, &format!("noisy-{spp}"));
@@ -229,7 +231,10 @@ pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u3
         let finished = |r: &RenderRecord| {
             let files =
                 std::iter::once(file.as_str()).chain(AuxKind::ALL.map(|k| own.file(k))).chain(r.variance.as_deref());
-            r.file == file && r.aux.as_ref() == Some(&own) && files.into_iter().all(|f| ctx.valid(f, &camera))
+            r.file == file
+                && r.aux.as_ref() == Some(&own)
+                && r.pixel_sampler == sampler
+                && files.into_iter().all(|f| ctx.valid(f, &camera))
         };
         match kept.filter(finished) {
             Some(r) => progress.noisy.push(r),
@@ -248,6 +253,7 @@ pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u3
                     render_seconds: out.seconds,
                     aux: Some(own),
                     variance: Some(variance),
+                    pixel_sampler: sampler.clone(),
                 });
                 ctx.rendered += 1;
                 ctx.record(&progress)?;
@@ -263,6 +269,7 @@ pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u3
             && a.seed == aux_seed
             && a.max_depth == Some(scene.max_depth)
             && a.files == clean
+            && a.pixel_sampler == sampler
             && AuxKind::ALL.iter().all(|&k| ctx.valid(clean.file(k), &camera))
     });
     let aux = match kept {
@@ -281,6 +288,7 @@ pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u3
                 render_seconds: out.seconds,
                 max_depth: Some(scene.max_depth),
                 files: clean,
+                pixel_sampler: sampler.clone(),
             }
         }
     };
@@ -297,6 +305,7 @@ pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u3
             && r.supersample == ss
             && r.firefly.factor == plan.firefly_factor
             && r.file == ref_file
+            && r.pixel_sampler == sampler
             && ctx.valid(&ref_file, &camera)
     });
     let (mut reference, mut reference_image) = match kept {
@@ -327,6 +336,7 @@ pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u3
                     energy_removed: stats.energy_removed,
                 },
                 check: None,
+                pixel_sampler: sampler.clone(),
             };
             (record, Some(image))
         }
