@@ -389,7 +389,10 @@ fn check_eval_report(report: &Path) {
     let md = std::fs::read_to_string(report.join("report.md")).unwrap();
     assert!(md.contains("## cbox_v001 at 1 spp (as the thesis's Tables 8.1–8.3)"), "{md}");
     assert!(
-        md.contains("auxiliary inputs: each noisy render's own auxiliary images, at its spp (`--aux noisy`)"),
+        md.contains(
+            "auxiliary inputs: each noisy render's own auxiliary images, at its spp (`--aux noisy`); the noisy \
+             inputs' pixel positions: independent (`--pixel-sampler independent`)."
+        ),
         "{md}"
     );
     assert!(md.contains("](error_vs_time_rel_mse.svg)") && md.contains("run/model at 1 spp"), "{md}");
@@ -1204,21 +1207,23 @@ fn noisy_renders_keep_their_own_features() {
     assert!(err.contains("aux: clean in the run, noisy now"), "{err}");
 }
 
-/// A dataset records each image's pixel sampler: one rendered with independent positions (hush's only
-/// sampler before stratification; such manifests carry no `pixel_sampler`) is rendered again, every image of
-/// it, by a run with the default stratified positions, which records them; a third run keeps them all.
+/// A dataset records each image's pixel sampler: one rendered with independent positions (the default; such
+/// records carry no `pixel_sampler`, as every older manifest) is rendered again, every image of it, by a run
+/// with `--pixel-sampler stratified`, which records it; a third run keeps them all, and going back to the
+/// default renders them all again.
 #[test]
 fn a_dataset_renders_again_what_another_pixel_sampler_rendered() {
     let ds = scratch("pixel-sampler").join("ds");
     let args = cbox_dataset_args(&ds, "1", "2,4");
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    let stderr = expect_success(&[&args[..], &["--pixel-sampler", "independent"]].concat());
+    let stratified = [&args[..], &["--pixel-sampler", "stratified"]].concat();
+    let stderr = expect_success(&args);
     assert!(stderr.contains("4 images rendered"), "2 noisy renders, the features and the reference: {stderr}");
     let samplers = |ds: &Path| {
         let manifest = manifest_of(ds);
         let view = &manifest["views"][0];
-        let mut all: Vec<serde_json::Value> =
-            view["noisy"].as_array().unwrap().iter().map(|r| r["pixel_sampler"].clone()).collect();
+        let noisy = view["noisy"].as_array().unwrap().iter().map(|r| r["pixel_sampler"].clone());
+        let mut all: Vec<serde_json::Value> = noisy.collect();
         all.extend([view["aux"]["pixel_sampler"].clone(), view["reference"]["pixel_sampler"].clone()]);
         all
     };
@@ -1228,7 +1233,7 @@ fn a_dataset_renders_again_what_another_pixel_sampler_rendered() {
         samplers(&ds)
     );
     let independent = std::fs::read(ds.join("cbox_v000_000004.hdr.exr")).unwrap();
-    let stderr = expect_success(&args);
+    let stderr = expect_success(&stratified);
     assert!(stderr.contains("4 images rendered"), "every image again: {stderr}");
     assert!(samplers(&ds).iter().all(|s| s == "stratified"), "{:?}", samplers(&ds));
     assert_ne!(
@@ -1236,12 +1241,15 @@ fn a_dataset_renders_again_what_another_pixel_sampler_rendered() {
         independent,
         "another sampler, another image"
     );
-    let stderr = expect_success(&args);
+    let stderr = expect_success(&stratified);
     assert!(stderr.contains("0 images rendered"), "all kept: {stderr}");
+    let stderr = expect_success(&args);
+    assert!(stderr.contains("4 images rendered"), "back to independent positions: {stderr}");
+    assert_eq!(std::fs::read(ds.join("cbox_v000_000004.hdr.exr")).unwrap(), independent, "same seed, same image");
     let out = hush(&[&args[..], &["--pixel-sampler", "sobol"]].concat());
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "a usage error: {err}");
-    assert!(err.contains("unknown pixel sampler 'sobol' (stratified or independent)"), "{err}");
+    assert!(err.contains("unknown pixel sampler 'sobol' (independent or stratified)"), "{err}");
 }
 
 /// `hush denoise` without `--model` runs the built-in model for the inputs it has: a `hush render` EXR

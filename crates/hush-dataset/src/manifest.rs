@@ -49,9 +49,9 @@ pub struct RenderRecord {
     /// `<scene>_<view>_<spp>.var.exr`. `None` for renders from before it was stored, which are kept.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub variance: Option<String>,
-    /// Where its pixels' samples lay: `stratified` (hush's default since it has one); `None` for
-    /// independent positions, every render from before stratification. A resume renders again what differs
-    /// from the run's sampler.
+    /// Where its pixels' samples lay: `stratified`, or `None` for independent positions (the default, and
+    /// every render from before the sampler was recorded). A resume renders again what differs from the
+    /// run's sampler.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pixel_sampler: Option<String>,
 }
@@ -96,9 +96,9 @@ pub struct AuxRecord {
     pub max_depth: Option<u32>,
     #[serde(flatten)]
     pub files: AuxFiles,
-    /// Where its pixels' samples lay: `stratified` (hush's default since it has one); `None` for
-    /// independent positions, every render from before stratification. A resume renders again what differs
-    /// from the run's sampler.
+    /// Where its pixels' samples lay: `stratified`, or `None` for independent positions (the default, and
+    /// every render from before the sampler was recorded). A resume renders again what differs from the
+    /// run's sampler.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pixel_sampler: Option<String>,
 }
@@ -144,9 +144,9 @@ pub struct ReferenceRecord {
     pub firefly: FireflyRecord,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub check: Option<ReferenceCheck>,
-    /// Where its pixels' samples lay: `stratified` (hush's default since it has one); `None` for
-    /// independent positions, every render from before stratification. A resume renders again what differs
-    /// from the run's sampler.
+    /// Where its pixels' samples lay: `stratified`, or `None` for independent positions (the default, and
+    /// every render from before the sampler was recorded). A resume renders again what differs from the
+    /// run's sampler.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pixel_sampler: Option<String>,
 }

@@ -617,8 +617,8 @@ impl Parser<'_, '_> {
             self.warn(
                 node,
                 format!(
-                    "sampler '{ty}' is not supported: hush stratifies each pixel's sample positions (a scrambled \
-                     (0, 2)-sequence) and draws everything else independently"
+                    "sampler '{ty}' is not supported: hush samples independently (`--pixel-sampler stratified` \
+                     stratifies each pixel's sample positions)"
                 ),
             );
         }

@@ -90,22 +90,25 @@ impl RenderSettings {
 /// How a pixel's samples are placed in it (and its filter, by filter importance sampling). Either way each
 /// sample's position is uniform, so the pixel's estimate has the same expectation; every other random number
 /// of a path is independent of its position and of the other samples.
+///
+/// The default stays [`PixelSampler::Independent`]: hush's shipped models were trained on such renders, and
+/// on stratified ones (a tent film's sub-pixel light, veach-mis) they fall behind OIDN by more than the
+/// bar they ship under, even retrained on stratified renders (`docs/results/train-default/`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum PixelSampler {
     /// The pixel's samples are the points of a base-2 (0, 2)-sequence under a random digital shift of the
     /// pixel's own: any 2^k of them from the first fill the 2^k elementary intervals of the square (a 4 × 4
     /// grid at 16 spp), so the noise that comes from where in the pixel a sample lies (an edge, an emitter's
     /// rim, a texture) falls faster than 1/n. Pixels stay independent of each other.
-    #[default]
     Stratified,
-    /// Each position independent of the others (Mitsuba's `independent` sampler); hush's only sampler before
-    /// [`PixelSampler::Stratified`], which a dataset records.
+    /// Each position independent of the others (Mitsuba's `independent` sampler).
+    #[default]
     Independent,
 }
 
 impl PixelSampler {
-    /// Every sampler, in the order of [`PixelSampler::name`]'s list.
-    pub const ALL: [PixelSampler; 2] = [PixelSampler::Stratified, PixelSampler::Independent];
+    /// Every sampler.
+    pub const ALL: [PixelSampler; 2] = [PixelSampler::Independent, PixelSampler::Stratified];
 
     /// Its name on the command line and in a dataset's manifest.
     pub fn name(self) -> &'static str {
@@ -120,7 +123,7 @@ impl PixelSampler {
         PixelSampler::ALL
             .into_iter()
             .find(|s| s.name() == name)
-            .ok_or_else(|| format!("unknown pixel sampler '{name}' (stratified or independent)"))
+            .ok_or_else(|| format!("unknown pixel sampler '{name}' (independent or stratified)"))
     }
 }
 

@@ -131,9 +131,9 @@ pub struct RenderArgs {
     /// Random seed: the same seed gives the same image.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Where each pixel's samples lie: stratified (a scrambled (0, 2)-sequence per pixel, the default) or
-    /// independent (as Mitsuba's `independent` sampler, and hush before stratification)
-    #[arg(long, default_value = "stratified", value_parser = parse_pixel_sampler)]
+    /// Where each pixel's samples lie: independent (as Mitsuba's `independent` sampler; what hush's shipped
+    /// models were trained on) or stratified (a scrambled (0, 2)-sequence per pixel: less noise on edges)
+    #[arg(long, default_value = "independent", value_parser = parse_pixel_sampler)]
     pub pixel_sampler: hush_trace::PixelSampler,
     /// Also write an 8-bit sRGB preview of the beauty image.
     #[arg(long)]

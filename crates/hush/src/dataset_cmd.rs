@@ -67,10 +67,10 @@ pub struct DatasetArgs {
     /// a render of that many paths per pixel).
     #[arg(long, default_value_t = 0)]
     pub ref_check_spp: u32,
-    /// Where each pixel's samples lie: stratified (a scrambled (0, 2)-sequence per pixel, the default) or
-    /// independent (hush's renders before stratification). Recorded per image: a resume renders again
-    /// what the other sampler rendered.
-    #[arg(long, default_value = "stratified", value_parser = crate::cli::parse_pixel_sampler)]
+    /// Where each pixel's samples lie: independent (what hush's shipped models were trained on) or
+    /// stratified (a scrambled (0, 2)-sequence per pixel: less noise on edges). Recorded per image: a
+    /// resume renders again what the other sampler rendered.
+    #[arg(long, default_value = "independent", value_parser = crate::cli::parse_pixel_sampler)]
     pub pixel_sampler: hush_trace::PixelSampler,
     /// Samples per pixel of the clean auxiliary features (first hit only).
     #[arg(long, default_value_t = DatasetPlan::DEFAULT_AUX_SPP)]

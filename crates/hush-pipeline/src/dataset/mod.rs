@@ -66,8 +66,8 @@ pub struct DatasetPlan {
     pub pixel_sampler: PixelSampler,
 }
 
-/// How a manifest records `sampler`: by name, except independent positions, which renders from before the
-/// sampler was recorded had (`None`).
+/// How a manifest records `sampler`: by name, except independent positions (`None`), which every render
+/// from before the sampler was recorded has.
 pub(crate) fn sampler_record(sampler: PixelSampler) -> Option<String> {
     match sampler {
         PixelSampler::Independent => None,

@@ -198,7 +198,7 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
     report.notes.insert(
         0,
         format!(
-            "Dataset: {}; {}: {}; auxiliary inputs: {} (`--aux {}`).",
+            "Dataset: {}; {}: {}; auxiliary inputs: {} (`--aux {}`); the noisy inputs' pixel positions: {}.",
             hush_eval::shown_path(&plan.dataset),
             if plan.scenes.is_empty() {
                 "test views".to_string()
@@ -207,7 +207,8 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
             },
             views.len(),
             plan.aux.describe(),
-            plan.aux
+            plan.aux,
+            pixel_positions(&views)
         ),
     );
     report.notes.push(format!(
@@ -340,4 +341,15 @@ fn cpu_model() -> Option<String> {
     let info = std::fs::read_to_string("/proc/cpuinfo").ok()?;
     let line = info.lines().find(|l| l.starts_with("model name"))?;
     Some(line.split_once(':')?.1.trim().to_string())
+}
+
+/// How the evaluated noisy inputs placed their samples in each pixel, as the manifest records it.
+fn pixel_positions(views: &[hush_dataset::ViewRecord]) -> String {
+    let samplers: std::collections::BTreeSet<Option<&str>> =
+        views.iter().flat_map(|v| v.noisy.iter().map(|r| r.pixel_sampler.as_deref())).collect();
+    let name = |s: &Option<&str>| s.unwrap_or("independent").to_string();
+    match samplers.iter().collect::<Vec<_>>()[..] {
+        [one] => format!("{} (`--pixel-sampler {}`)", name(one), name(one)),
+        _ => format!("mixed ({})", samplers.iter().map(name).collect::<Vec<_>>().join(", ")),
+    }
 }
