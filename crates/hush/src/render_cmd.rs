@@ -29,19 +29,15 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let renderer = Renderer::new(&gpu)?.with_generic_kernel(args.generic);
     let kernel = if args.generic { KernelFeatures::ALL } else { KernelFeatures::of(&scene) };
     eprintln!("scene: {} triangles; kernel: {kernel:?}", scene.triangle_count());
+    let settings = RenderSettings { spp, seed: args.seed, pixel_sampler: args.pixel_sampler };
     let warm_up_cpu = if args.warm_up {
         let cpu0 = cpu_seconds();
-        renderer.render(
-            &scene,
-            &RenderSettings { spp: 1, seed: args.seed, pixel_sampler: args.pixel_sampler },
-            &mut |_, _| {},
-        )?;
+        renderer.render(&scene, &RenderSettings { spp: 1, ..settings }, &mut |_, _| {})?;
         Some(cpu_seconds() - cpu0)
     } else {
         None
     };
     let cpu0 = cpu_seconds();
-    let settings = RenderSettings { spp, seed: args.seed, pixel_sampler: args.pixel_sampler };
     let out = crate::progress::render(&renderer, &scene, &settings, time_limit, "render")?;
     let cpu = cpu_seconds() - cpu0;
     if out.discarded_samples > 0 {

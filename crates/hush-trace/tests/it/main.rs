@@ -719,6 +719,31 @@ fn shapes_past_the_uniform_buffer_render_as_the_first_ones() {
     assert!(worst <= 1e-3 * peak, "largest difference {worst} (peak {peak})");
 }
 
+/// A 5×5 film (`filter`) looking straight at an emitting rectangle of `radiance` (and nothing else, at
+/// max_depth 1) whose edge, for the translation `shift` (`x="2"`: its left edge), runs through the middle
+/// of the centre pixel. Written under a folder named by `tag` and the process.
+fn edge_scene(tag: &str, filter: &str, shift: &str, radiance: f64) -> Scene {
+    let dir = std::env::temp_dir().join(format!("hush-{tag}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join(format!("edge-{filter}.xml"));
+    std::fs::write(
+        &path,
+        format!(
+            r#"<scene version="3.0.0">
+  <integrator type="path"><integer name="max_depth" value="1"/></integrator>
+  <sensor type="perspective"><float name="fov" value="20"/>
+    <transform name="to_world"><lookat origin="0,0,3" target="0,0,0" up="0,1,0"/></transform>
+    <film type="hdrfilm"><integer name="width" value="5"/><integer name="height" value="5"/><rfilter type="{filter}"/></film></sensor>
+  <shape type="rectangle"><transform name="to_world"><scale value="2"/><translate {shift}/></transform>
+    <bsdf type="diffuse"><rgb name="reflectance" value="0"/></bsdf>
+    <emitter type="area"><rgb name="radiance" value="{radiance}"/></emitter></shape>
+</scene>"#
+        ),
+    )
+    .unwrap();
+    Scene::load(&path).unwrap()
+}
+
 /// The per-pixel sample variance on analytic cases, at 65536 spp of a bright emitter (where E[x²] − E[x]²
 /// from f32 sums cancels): a camera looks straight at an emitting rectangle (radiance 1000.3, max_depth 1:
 /// emitters seen directly, nothing else) whose left edge runs through the middle of the centre pixel of
@@ -728,23 +753,7 @@ fn shapes_past_the_uniform_buffer_render_as_the_first_ones() {
 /// within 5 % (the sample variance of a Bernoulli of ½ has kurtosis 1: its own spread is far below that).
 #[test]
 fn sample_variance_is_exact_on_analytic_pixels() {
-    let dir = std::env::temp_dir().join(format!("hush-variance-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("edge.xml");
-    std::fs::write(
-        &path,
-        r#"<scene version="3.0.0">
-  <integrator type="path"><integer name="max_depth" value="1"/></integrator>
-  <sensor type="perspective"><float name="fov" value="20"/>
-    <transform name="to_world"><lookat origin="0,0,3" target="0,0,0" up="0,1,0"/></transform>
-    <film type="hdrfilm"><integer name="width" value="5"/><integer name="height" value="5"/><rfilter type="box"/></film></sensor>
-  <shape type="rectangle"><transform name="to_world"><scale value="2"/><translate x="2"/></transform>
-    <bsdf type="diffuse"><rgb name="reflectance" value="0"/></bsdf>
-    <emitter type="area"><rgb name="radiance" value="1000.3"/></emitter></shape>
-</scene>"#,
-    )
-    .unwrap();
-    let scene = Scene::load(&path).unwrap();
+    let scene = edge_scene("variance", "box", "x=\"2\"", 1000.3);
     let spp = 65536u32;
     let out = render(&scene, spp, 9);
     let radiance = 1000.3f64;
@@ -772,26 +781,8 @@ fn sample_variance_is_exact_on_analytic_pixels() {
 /// misses it at some seed.
 #[test]
 fn pixel_positions_are_stratified() {
-    let dir = std::env::temp_dir().join(format!("hush-strata-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
     for (filter, shift) in [("box", "x=\"2\""), ("tent", "x=\"2\""), ("box", "y=\"2\""), ("tent", "y=\"-2\"")] {
-        let path = dir.join("edge.xml");
-        std::fs::write(
-            &path,
-            format!(
-                r#"<scene version="3.0.0">
-  <integrator type="path"><integer name="max_depth" value="1"/></integrator>
-  <sensor type="perspective"><float name="fov" value="20"/>
-    <transform name="to_world"><lookat origin="0,0,3" target="0,0,0" up="0,1,0"/></transform>
-    <film type="hdrfilm"><integer name="width" value="5"/><integer name="height" value="5"/><rfilter type="{filter}"/></film></sensor>
-  <shape type="rectangle"><transform name="to_world"><scale value="2"/><translate {shift}/></transform>
-    <bsdf type="diffuse"><rgb name="reflectance" value="0"/></bsdf>
-    <emitter type="area"><rgb name="radiance" value="16"/></emitter></shape>
-</scene>"#
-            ),
-        )
-        .unwrap();
-        let scene = Scene::load(&path).unwrap();
+        let scene = edge_scene("strata", filter, shift, 16.0);
         let renderer = Renderer::new(gpu()).unwrap();
         let centre = |seed, pixel_sampler| {
             let settings = RenderSettings { spp: 16, seed, pixel_sampler };
