@@ -1252,6 +1252,64 @@ fn a_dataset_renders_again_what_another_pixel_sampler_rendered() {
     assert!(err.contains("unknown pixel sampler 'sobol' (independent or stratified)"), "{err}");
 }
 
+/// `--test-repeats 3` renders each test view's ladder twice more, with their own seeds, under repeats/ (the
+/// training view gets none); a rerun keeps them, a lost one is rendered again; `hush eval` scores each case by the
+/// mean over the three renders and lists each render's PSNR.
+#[test]
+fn test_repeats_are_rendered_kept_and_averaged_by_eval() {
+    let dir = scratch("test-repeats");
+    let ds = dir.join("ds");
+    let base = cbox_dataset_args(&ds, "2", "1,2");
+    let base: Vec<&str> = base.iter().map(String::as_str).collect();
+    let args = [&base[..], &["--test-repeats", "3"]].concat();
+    let stderr = expect_success(&args);
+    assert!(stderr.contains("12 images rendered"), "4 for the training view, 2 × 3 + 2 for the test view: {stderr}");
+    let manifest = manifest_of(&ds);
+    assert_eq!(manifest["config"]["test_repeats"], 3);
+    let views = manifest["views"].as_array().unwrap();
+    let test = views.iter().find(|v| v["split"] == "test").unwrap();
+    assert!(views.iter().filter(|v| v["split"] == "train").all(|v| v["repeats"].is_null()), "{views:?}");
+    let repeats = test["repeats"].as_array().unwrap();
+    assert_eq!(repeats.len(), 2);
+    let mut seeds = vec![test["noisy"][0]["seed"].as_u64().unwrap()];
+    for (k, ladder) in repeats.iter().enumerate() {
+        let spps: Vec<u64> = ladder.as_array().unwrap().iter().map(|r| r["spp"].as_u64().unwrap()).collect();
+        assert_eq!(spps, [1, 2]);
+        assert_eq!(ladder[0]["file"], format!("repeats/cbox_v001_000001_r{}.hdr.exr", k + 1));
+        assert_eq!(ladder[0]["aux"]["albedo"], format!("repeats/cbox_v001_000001_r{}.alb.exr", k + 1));
+        seeds.push(ladder[0]["seed"].as_u64().unwrap());
+    }
+    seeds.dedup();
+    assert_eq!(seeds.len(), 3, "each render of 1 spp has its own seed: {seeds:?}");
+    assert!(expect_success(&args).contains("0 images rendered"));
+    expect_success(&["dataset", "check", s(&ds)]);
+    std::fs::remove_file(ds.join("repeats/cbox_v001_000002_r2.var.exr")).unwrap();
+    let err = expect_error(&["dataset", "check", s(&ds)]);
+    assert!(err.contains("cbox_v001_000002_r2.var.exr"), "{err}");
+    assert!(expect_success(&args).contains("1 images rendered"), "only the repeat that lost a file");
+
+    let report = dir.join("report");
+    let stderr = expect_success(&["eval", "--dataset", s(&ds), "--out", s(&report), "--timing-runs", "1"]);
+    assert!(!stderr.contains("error"), "{stderr}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(report.join("summary.json")).unwrap()).unwrap();
+    let rows = summary["rows"].as_array().unwrap();
+    let scored: Vec<&serde_json::Value> = rows.iter().filter(|r| r["method"] != "reference").collect();
+    assert_eq!(scored.len(), 4, "noisy and OIDN at 1 and 2 spp: {rows:?}");
+    for row in scored {
+        let each: Vec<f64> = row["psnr_renders"].as_array().unwrap().iter().map(|p| p.as_f64().unwrap()).collect();
+        assert_eq!(each.len(), 3, "{row}");
+        assert!(each.iter().any(|&p| (p - each[0]).abs() > 1e-6), "three seeds, three images: {each:?}");
+        let mean = each.iter().sum::<f64>() / 3.0;
+        assert!((row["psnr"].as_f64().unwrap() - mean).abs() < 1e-9, "the row's PSNR is their mean: {row}");
+    }
+    let text = std::fs::read_to_string(report.join("report.md")).unwrap();
+    assert!(text.contains("mean of each metric over 3 renders of its noisy input"), "{text}");
+    assert!(
+        expect_error(&[&base[..], &["--test-repeats", "0"]].concat()).contains("--test-repeats must be at least 1")
+    );
+}
+
 /// `hush denoise` without `--model` runs the built-in model for the inputs it has: a `hush render` EXR
 /// carries albedo and normal layers, so hush's shipped `hush_alb_nrm`; a color-only EXR gets `hush_color`;
 /// color and albedo, which no shipped model takes, OIDN's `rt_hdr_alb`.

@@ -22,7 +22,7 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::{Error, Image, Result, ViewRecord, check_finite, read_rgb};
+use crate::{Error, Image, RenderRecord, Result, ViewRecord, check_finite, read_rgb};
 
 /// Where the files of a dataset live and what they are called.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -147,6 +147,16 @@ impl Layout {
         format!("{scene}_{view}_{spp:06}.var.exr")
     }
 
+    /// The folder of the repeated renders (`hush dataset --test-repeats`), relative to the root: out of the
+    /// way of Open Image Denoise's toolkit, which reads the root's `<name>_<spp>.<feature>.exr` files.
+    pub const REPEATS: &'static str = "repeats";
+
+    /// `repeats/<scene>_<view>_<spp:06>_r<k>.<ext>.exr`: the beauty (`hdr`), a feature of [`AuxKind`] or the
+    /// variance (`var`) of repeat `k` of the noisy render at `spp`.
+    pub fn repeat_name(scene: &str, view: &str, spp: u32, k: u32, ext: &str) -> String {
+        format!("{}/{scene}_{view}_{spp:06}_r{k}.{ext}.exr", Self::REPEATS)
+    }
+
     /// `<scene>_<view>_ref.hdr.exr`.
     pub fn reference_name(scene: &str, view: &str) -> String {
         format!("{scene}_{view}_ref.hdr.exr")
@@ -206,7 +216,6 @@ pub fn load_view_with(
     aux: AuxSource,
     variance: bool,
 ) -> Result<ViewImages> {
-    let layout = Layout::new(root.as_ref());
     let noisy = view.noisy_at(spp).ok_or_else(|| {
         Error::Dataset(format!(
             "view {}_{} has no noisy render at {spp} spp; stored: {:?}. Render it or pick a stored spp",
@@ -215,6 +224,20 @@ pub fn load_view_with(
             view.noisy.iter().map(|r| r.spp).collect::<Vec<_>>()
         ))
     })?;
+    load_render_with(root, view, noisy, aux, variance)
+}
+
+/// [`load_view_with`] for one render of `view` (its noisy render at some spp or a repeat of it,
+/// [`ViewRecord::renders_at`]).
+pub fn load_render_with(
+    root: impl AsRef<Path>,
+    view: &ViewRecord,
+    noisy: &RenderRecord,
+    aux: AuxSource,
+    variance: bool,
+) -> Result<ViewImages> {
+    let layout = Layout::new(root.as_ref());
+    let spp = noisy.spp;
     let features = match aux {
         AuxSource::Clean => AuxKind::ALL.map(|k| view.aux.file(k)),
         AuxSource::Noisy => match &noisy.aux {

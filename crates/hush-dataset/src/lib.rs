@@ -49,7 +49,7 @@ pub use exr_io::{
 };
 pub use firefly::{DEFAULT_FIREFLY_FACTOR, DespeckleStats, despeckle, luminance};
 pub use image::Image;
-pub use layout::{AuxKind, AuxSource, Layout, ViewImages, load_view, load_view_with};
+pub use layout::{AuxKind, AuxSource, Layout, ViewImages, load_render_with, load_view, load_view_with};
 pub use manifest::{
     AuxFiles, AuxRecord, CameraRecord, DatasetConfig, FireflyRecord, Manifest, PendingView, ProbeRecord,
     ProceduralRecord, ProceduralScene, ReferenceCheck, ReferenceRecord, RenderRecord, SceneEntry, SkippedScene, Split,

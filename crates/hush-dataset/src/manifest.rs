@@ -189,6 +189,11 @@ pub struct ViewRecord {
     pub noisy: Vec<RenderRecord>,
     pub reference: ReferenceRecord,
     pub aux: AuxRecord,
+    /// More renders of the same ladder with other seeds (`hush dataset --test-repeats`, test views only):
+    /// `repeats[k - 1]` is the ladder of repeat `k`, its files under `repeats/`. An evaluation scores each
+    /// spp by the mean over the noisy render and its repeats. Empty in every dataset without them.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub repeats: Vec<Vec<RenderRecord>>,
 }
 
 /// A view whose images are being rendered: what is finished so far.
@@ -202,6 +207,9 @@ pub struct PendingView {
     pub noisy: Vec<RenderRecord>,
     pub reference: Option<ReferenceRecord>,
     pub aux: Option<AuxRecord>,
+    /// [`ViewRecord::repeats`] finished so far.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub repeats: Vec<Vec<RenderRecord>>,
 }
 
 impl PendingView {
@@ -216,6 +224,7 @@ impl PendingView {
             noisy: self.noisy.clone(),
             reference: self.reference.clone()?,
             aux: self.aux.clone()?,
+            repeats: self.repeats.clone(),
         })
     }
 }
@@ -231,6 +240,7 @@ impl From<ViewRecord> for PendingView {
             noisy: v.noisy,
             reference: Some(v.reference),
             aux: Some(v.aux),
+            repeats: v.repeats,
         }
     }
 }
@@ -241,9 +251,18 @@ impl ViewRecord {
         self.noisy.iter().find(|r| r.spp == spp)
     }
 
-    /// Checks the names and that no spp appears twice.
+    /// Every render at `spp`: the noisy render first, then its repeats (`--test-repeats`) that have one.
+    pub fn renders_at(&self, spp: u32) -> Vec<&RenderRecord> {
+        self.noisy_at(spp)
+            .into_iter()
+            .chain(self.repeats.iter().filter_map(|ladder| ladder.iter().find(|r| r.spp == spp)))
+            .collect()
+    }
+
+    /// Checks the names and that no spp appears twice in the ladder or in one of its repeats.
     pub fn validate(&self) -> Result<()> {
-        validate_view(&self.scene, &self.view, &self.noisy)
+        validate_view(&self.scene, &self.view, &self.noisy)?;
+        self.repeats.iter().try_for_each(|ladder| validate_view(&self.scene, &self.view, ladder))
     }
 }
 
@@ -305,6 +324,9 @@ pub struct DatasetConfig {
     /// The pixel sampler of the run's renders (`stratified`); `None`: independent positions.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pixel_sampler: Option<String>,
+    /// Renders of each test view's ladder, the noisy one included (`--test-repeats`); `None`: 1.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub test_repeats: Option<u32>,
 }
 
 /// Procedural scenes generated for a dataset: enough to generate the same scenes again.
@@ -490,6 +512,10 @@ impl Manifest {
     pub fn upsert_progress(&mut self, mut progress: PendingView) -> Result<()> {
         validate_view(&progress.scene, &progress.view, &progress.noisy)?;
         progress.noisy.sort_by_key(|r| r.spp);
+        for ladder in &mut progress.repeats {
+            validate_view(&progress.scene, &progress.view, ladder)?;
+            ladder.sort_by_key(|r| r.spp);
+        }
         if let Some(done) = progress.complete() {
             self.upsert(done)?;
             return Ok(());
@@ -524,7 +550,7 @@ impl Manifest {
     /// files and variance where recorded, the reference and the four features).
     pub fn files_of(view: &ViewRecord) -> Vec<String> {
         let mut files = Vec::new();
-        for r in &view.noisy {
+        for r in view.noisy.iter().chain(view.repeats.iter().flatten()) {
             files.push(r.file.clone());
             match &r.aux {
                 Some(own) => files.extend(crate::AuxKind::ALL.iter().map(|&k| own.file(k).to_string())),

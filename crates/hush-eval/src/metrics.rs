@@ -62,6 +62,30 @@ pub fn color_shift(test: &Image, reference: &Image) -> Result<Option<f64>> {
     Ok(Some(t.iter().zip(&r).map(|(t, r)| (t / r - 1.0).abs()).fold(0.0, f64::max)))
 }
 
+impl Metrics {
+    /// The mean of each metric over `all` (the renders of one case, `hush dataset --test-repeats`): PSNR is the
+    /// mean of the dB values (+∞ if one is), an optional metric is `None` if one of them is. `None` for none.
+    pub fn mean(all: &[Metrics]) -> Option<Metrics> {
+        let first = all.first()?;
+        let n = all.len() as f64;
+        let mean = |f: fn(&Metrics) -> f64| all.iter().map(f).sum::<f64>() / n;
+        let mean_opt = |f: fn(&Metrics) -> Option<f64>| {
+            all.iter().map(f).collect::<Option<Vec<f64>>>().map(|v| v.iter().sum::<f64>() / n)
+        };
+        Some(Metrics {
+            psnr: mean(|m| m.psnr),
+            ssim: mean(|m| m.ssim),
+            mae: mean(|m| m.mae),
+            mse: mean(|m| m.mse),
+            rel_mse: mean(|m| m.rel_mse),
+            ms_ssim: mean_opt(|m| m.ms_ssim),
+            flip: mean_opt(|m| m.flip),
+            color_shift: mean_opt(|m| m.color_shift),
+            exposure: first.exposure,
+        })
+    }
+}
+
 /// Computes every metric at once (tonemapping each image once).
 pub fn compare(test: &Image, reference: &Image) -> Result<Metrics> {
     check_pair(test, reference)?;

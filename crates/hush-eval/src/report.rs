@@ -127,6 +127,11 @@ pub struct Row {
     /// A preview image, as a path relative to the report directory (used as a link in Markdown).
     #[serde(default)]
     pub preview: Option<String>,
+    /// Where the case has several renders of the noisy input (`hush dataset --test-repeats`): each metric above
+    /// is the mean over them, and these are their PSNRs, the dataset's noisy render first (its image is the
+    /// preview; render and denoise times are its own). Empty: one render.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub psnr_renders: Vec<f64>,
 }
 
 impl Row {
@@ -147,7 +152,18 @@ impl Row {
             render_seconds: None,
             denoise_seconds: None,
             preview: None,
+            psnr_renders: Vec::new(),
         }
+    }
+
+    /// [`Row::new`] from the metrics of each render of the case: their means, and their PSNRs where there are
+    /// several.
+    pub fn of_renders(view: &str, method: &str, spp: u32, renders: &[Metrics]) -> Option<Row> {
+        let mut row = Row::new(view, method, spp, &Metrics::mean(renders)?);
+        if renders.len() > 1 {
+            row.psnr_renders = renders.iter().map(|m| m.psnr).collect();
+        }
+        Some(row)
     }
 
     /// Render plus denoise seconds: what this image cost (`None` without a render time).
@@ -530,6 +546,7 @@ impl Report {
                     render_seconds: mean_some(|r| r.render_seconds),
                     denoise_seconds: mean_some(|r| r.denoise_seconds),
                     preview: None,
+                    psnr_renders: Vec::new(),
                 }
             })
             .collect()

@@ -72,6 +72,11 @@ pub struct DatasetArgs {
     /// resume renders again what the other sampler rendered.
     #[arg(long, default_value = "independent", value_parser = crate::cli::parse_pixel_sampler)]
     pub pixel_sampler: hush_trace::PixelSampler,
+    /// Render each test view's spp ladder this many times, each render with its own seed (1: once). `hush eval`
+    /// then scores every case by the mean over its renders: one render decides a denoiser's PSNR by a few pixels
+    /// where a light is smaller than a pixel. The repeats go under repeats/, out of OIDN's toolkit's way.
+    #[arg(long, default_value_t = 1)]
+    pub test_repeats: u32,
     /// Samples per pixel of the clean auxiliary features (first hit only).
     #[arg(long, default_value_t = DatasetPlan::DEFAULT_AUX_SPP)]
     pub aux_spp: u32,
@@ -132,6 +137,7 @@ impl DatasetArgs {
             seed: self.seed,
             shard: self.shard,
             pixel_sampler: self.pixel_sampler,
+            test_repeats: self.test_repeats,
         }
     }
 }

@@ -48,6 +48,7 @@ pub fn record(scene: &str, view: &str, spps: &[u32], size: u32) -> ViewRecord {
             files: AuxFiles::from_fn(|kind| Layout::aux_name(scene, view, kind)),
             pixel_sampler: None,
         },
+        repeats: Vec::new(),
     }
 }
 
@@ -209,6 +210,7 @@ fn config(scenes: &[&str], views: u32, spp: &[u32]) -> DatasetConfig {
         skipped: Vec::new(),
         procedural: None,
         pixel_sampler: None,
+        test_repeats: None,
     }
 }
 

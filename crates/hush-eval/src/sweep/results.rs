@@ -68,6 +68,7 @@ impl EvalRow {
             render_seconds: self.render_seconds,
             denoise_seconds: self.denoise_seconds,
             preview: None,
+            psnr_renders: Vec::new(),
         }
     }
 }

@@ -64,6 +64,9 @@ pub struct DatasetPlan {
     pub shard: Option<(u32, u32)>,
     /// Where each pixel's samples lie; a resume renders again what another sampler rendered.
     pub pixel_sampler: PixelSampler,
+    /// Renders of each test view's spp ladder (at least 1): the noisy render and `test_repeats - 1` repeats
+    /// with other seeds, which an evaluation averages over.
+    pub test_repeats: u32,
 }
 
 /// How a manifest records `sampler`: by name, except independent positions (`None`), which every render
@@ -108,6 +111,7 @@ impl DatasetPlan {
             seed: 0,
             shard: None,
             pixel_sampler: PixelSampler::default(),
+            test_repeats: 1,
         }
     }
 
@@ -137,6 +141,9 @@ impl DatasetPlan {
         {
             bail!("every spp (--spp, --ref-spp, --test-ref-spp, --aux-spp) must be at least 1");
         }
+        if self.test_repeats == 0 {
+            bail!("--test-repeats must be at least 1 (the noisy render itself)");
+        }
         if self.views == 0 || self.test_views > self.views {
             bail!("--views must be at least 1 and --test-views at most --views");
         }
@@ -159,9 +166,16 @@ impl DatasetPlan {
         }
     }
 
-    /// Images rendered or kept per view: the ladder, the features, the reference and its check.
-    fn images_per_view(&self) -> u64 {
-        self.ladder().len() as u64 + 2 + u64::from(self.ref_check_spp > 0)
+    /// Images rendered or kept per view of `split`: the ladder (and its repeats in a test view), the features,
+    /// the reference and its check.
+    fn images_per_view(&self, split: Split) -> u64 {
+        let ladders = if split == Split::Test { u64::from(self.test_repeats.max(1)) } else { 1 };
+        self.ladder().len() as u64 * ladders + 2 + u64::from(self.ref_check_spp > 0)
+    }
+
+    /// The split of view `v` of a scene whose split is `scene_split` (`None`: its last `test_views` views test).
+    fn split_of(&self, scene_split: Option<Split>, v: u32) -> Split {
+        scene_split.unwrap_or(if v >= self.views - self.test_views { Split::Test } else { Split::Train })
     }
 }
 
@@ -230,6 +244,7 @@ pub fn build(plan: &DatasetPlan, renderer: &Renderer, observer: &dyn Observer) -
         skipped,
         procedural,
         pixel_sampler: sampler_record(plan.pixel_sampler),
+        test_repeats: (plan.test_repeats > 1).then_some(plan.test_repeats),
     };
     let known = Manifest::load_or_default(out)?;
     let (mut own, own_path) = match plan.shard {
@@ -244,7 +259,9 @@ pub fn build(plan: &DatasetPlan, renderer: &Renderer, observer: &dyn Observer) -
     // Temporary files of writes a killed run of these jobs left behind.
     let own_name = own_path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let prefixes: Vec<String> = jobs.iter().map(|&(s, v)| format!("{}_v{v:03}_", scenes[s].name)).collect();
-    for tmp in temp_files(out)? {
+    let repeats = out.join(Layout::REPEATS);
+    let in_repeats = if repeats.is_dir() { temp_files(&repeats)? } else { Vec::new() };
+    for tmp in temp_files(out)?.into_iter().chain(in_repeats) {
         let file = tmp.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         if let Some(target) = temp_target(&file)
             && (target == own_name || prefixes.iter().any(|p| target.starts_with(p.as_str())))
@@ -253,7 +270,8 @@ pub fn build(plan: &DatasetPlan, renderer: &Renderer, observer: &dyn Observer) -
         }
     }
 
-    observer.task("dataset", "images", jobs.len() as u64 * plan.images_per_view(), 0);
+    let images = jobs.iter().map(|&(s, v)| plan.images_per_view(plan.split_of(scenes[s].split, v))).sum();
+    observer.task("dataset", "images", images, 0);
     let mut ctx =
         views::Ctx { plan, layout, renderer, observer, own, own_path, rendered: 0, done: 0, message: String::new() };
     let start = std::time::Instant::now();
@@ -279,7 +297,7 @@ pub fn build(plan: &DatasetPlan, renderer: &Renderer, observer: &dyn Observer) -
             let job = &scenes[s];
             ctx.message = format!("view {}/{}", k + 1, jobs.len());
             ctx.observer.progress(ctx.done, &ctx.message);
-            let split = job.split.unwrap_or(if v >= plan.views - plan.test_views { Split::Test } else { Split::Train });
+            let split = plan.split_of(job.split, v);
             views::render_view(&mut ctx, &known, job, v, split)
                 .with_context(|| format!("{} v{v:03} (scene {})", job.name, job.path.display()))
         });

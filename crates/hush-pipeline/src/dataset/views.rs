@@ -182,6 +182,61 @@ fn aux_image(out: &RenderOutput, kind: AuxKind) -> &hush_dataset::Image {
     }
 }
 
+/// Where one noisy render's files go.
+struct NoisyNames {
+    file: String,
+    aux: AuxFiles,
+    variance: String,
+}
+
+/// One noisy render: `kept` where a previous run finished it with these files, seed and sampler (its beauty,
+/// its own features and its variance all valid), else rendered now and written. Whether it was rendered.
+#[allow(clippy::too_many_arguments)]
+fn noisy_render(
+    ctx: &mut Ctx,
+    scene: &Scene,
+    camera: &CameraRecord,
+    kept: Option<&RenderRecord>,
+    names: NoisyNames,
+    spp: u32,
+    seed: u64,
+    label: &str,
+) -> Result<(RenderRecord, bool)> {
+    let sampler = sampler_record(ctx.plan.pixel_sampler);
+    let NoisyNames { file, aux: own, variance } = names;
+    // A render is kept with its own features; one from before they were stored is rendered again.
+    // Its variance file, where it has one (renders from before those were stored have none), must be
+    // valid too: `hush dataset check` checks it, and a re-run is what mends what the check finds.
+    let finished = |r: &&RenderRecord| {
+        let files =
+            std::iter::once(file.as_str()).chain(AuxKind::ALL.map(|k| own.file(k))).chain(r.variance.as_deref());
+        r.file == file
+            && r.aux.as_ref() == Some(&own)
+            && r.pixel_sampler == sampler
+            && files.into_iter().all(|f| ctx.valid(f, camera))
+    };
+    if let Some(r) = kept.filter(finished) {
+        return Ok((r.clone(), false));
+    }
+    let out = ctx.render(scene, spp, seed, &format!("{label} {spp} spp"))?;
+    for kind in AuxKind::ALL {
+        write_rgb(ctx.layout.path(own.file(kind)), aux_image(&out, kind))?;
+    }
+    write_rgb(ctx.layout.path(&variance), &out.color_variance)?;
+    write_rgb(ctx.layout.path(&file), &out.color)?;
+    ctx.rendered += 1;
+    let record = RenderRecord {
+        spp,
+        seed,
+        file,
+        render_seconds: out.seconds,
+        aux: Some(own),
+        variance: Some(variance),
+        pixel_sampler: sampler,
+    };
+    Ok((record, true))
+}
+
 /// Renders (or keeps) every image of one view.
 pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u32, split: Split) -> Result<()> {
     let plan = ctx.plan;
@@ -216,50 +271,53 @@ pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u3
         noisy: Vec::new(),
         reference: None,
         aux: None,
+        repeats: Vec::new(),
     };
 
     let sampler = sampler_record(plan.pixel_sampler);
     let spps = plan.ladder();
     for &spp in &spps {
         let seed = render_seed(plan.seed, name, v, &format!("noisy-{spp}"));
-        let file = Layout::noisy_name(name, &view, spp);
-        let own = AuxFiles::from_fn(|kind| Layout::noisy_aux_name(name, &view, spp, kind));
-        let kept = previous.as_ref().and_then(|p| p.noisy.iter().find(|r| r.spp == spp && r.seed == seed)).cloned();
-        // A render is kept with its own features; one from before they were stored is rendered again.
-        // Its variance file, where it has one (renders from before those were stored have none), must be
-        // valid too: `hush dataset check` checks it, and a re-run is what mends what the check finds.
-        let finished = |r: &RenderRecord| {
-            let files =
-                std::iter::once(file.as_str()).chain(AuxKind::ALL.map(|k| own.file(k))).chain(r.variance.as_deref());
-            r.file == file
-                && r.aux.as_ref() == Some(&own)
-                && r.pixel_sampler == sampler
-                && files.into_iter().all(|f| ctx.valid(f, &camera))
+        let names = NoisyNames {
+            file: Layout::noisy_name(name, &view, spp),
+            aux: AuxFiles::from_fn(|kind| Layout::noisy_aux_name(name, &view, spp, kind)),
+            variance: Layout::noisy_variance_name(name, &view, spp),
         };
-        match kept.filter(finished) {
-            Some(r) => progress.noisy.push(r),
-            None => {
-                let out = ctx.render(&scene, spp, seed, &format!("{label} {spp} spp"))?;
-                for kind in AuxKind::ALL {
-                    write_rgb(ctx.layout.path(own.file(kind)), aux_image(&out, kind))?;
-                }
-                let variance = Layout::noisy_variance_name(name, &view, spp);
-                write_rgb(ctx.layout.path(&variance), &out.color_variance)?;
-                write_rgb(ctx.layout.path(&file), &out.color)?;
-                progress.noisy.push(RenderRecord {
-                    spp,
-                    seed,
-                    file,
-                    render_seconds: out.seconds,
-                    aux: Some(own),
-                    variance: Some(variance),
-                    pixel_sampler: sampler.clone(),
-                });
-                ctx.rendered += 1;
-                ctx.record(&progress)?;
-            }
+        let kept = previous.as_ref().and_then(|p| p.noisy.iter().find(|r| r.spp == spp && r.seed == seed));
+        let (record, rendered) = noisy_render(ctx, &scene, &camera, kept, names, spp, seed, &label)?;
+        progress.noisy.push(record);
+        if rendered {
+            ctx.record(&progress)?;
         }
         ctx.advance();
+    }
+    // Test views: the same ladder again with other seeds, so that an evaluation can average over renders.
+    let repeats = if split == Split::Test { plan.test_repeats.max(1) - 1 } else { 0 };
+    if repeats > 0 {
+        std::fs::create_dir_all(ctx.layout.path(Layout::REPEATS))
+            .with_context(|| format!("creating {}", ctx.layout.path(Layout::REPEATS).display()))?;
+    }
+    for k in 1..=repeats {
+        progress.repeats.push(Vec::new());
+        for &spp in &spps {
+            let seed = render_seed(plan.seed, name, v, &format!("noisy-{spp}-repeat-{k}"));
+            let names = NoisyNames {
+                file: Layout::repeat_name(name, &view, spp, k, "hdr"),
+                aux: AuxFiles::from_fn(|kind| Layout::repeat_name(name, &view, spp, k, kind.extension())),
+                variance: Layout::repeat_name(name, &view, spp, k, "var"),
+            };
+            let kept = previous
+                .as_ref()
+                .and_then(|p| p.repeats.get(k as usize - 1))
+                .and_then(|ladder| ladder.iter().find(|r| r.spp == spp && r.seed == seed));
+            let label = format!("{label} repeat {k}");
+            let (record, rendered) = noisy_render(ctx, &scene, &camera, kept, names, spp, seed, &label)?;
+            progress.repeats[k as usize - 1].push(record);
+            if rendered {
+                ctx.record(&progress)?;
+            }
+            ctx.advance();
+        }
     }
 
     let clean = AuxFiles::from_fn(|kind| Layout::aux_name(name, &view, kind));

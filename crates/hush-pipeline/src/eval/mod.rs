@@ -11,7 +11,7 @@ mod pictures;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use hush_dataset::{AuxSource, Image, Manifest, Split, load_view_with, write_png_preview};
+use hush_dataset::{AuxSource, Image, Manifest, Split, load_render_with, write_png_preview};
 use hush_eval::viewer::file_safe;
 use hush_eval::{REFERENCE, Report, Row, Viewer, compare, exposure_of};
 
@@ -211,6 +211,17 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
             pixel_positions(&views)
         ),
     );
+    let most = views.iter().map(|v| 1 + v.repeats.len()).max().unwrap_or(1);
+    if most > 1 {
+        let least = views.iter().map(|v| 1 + v.repeats.len()).min().unwrap_or(1);
+        let count = if least == most { most.to_string() } else { format!("{least} to {most}") };
+        report.notes.push(format!(
+            "Each case is scored by the mean of each metric over {count} renders of its noisy input with independent \
+             seeds (the dataset's and its repeats, `hush dataset --test-repeats`): where a light is smaller than a \
+             pixel, one render decides a PSNR by a few pixels. summary.json lists each render's PSNR \
+             (`psnr_renders`); times, previews and pictures are the first render's."
+        ));
+    }
     report.notes.push(format!(
         "Machine: {}{} logical CPUs{}; denoise time is the median of {} warm runs on {}; render times are those \
          the dataset's manifest recorded on the machine that rendered it.",
@@ -271,55 +282,86 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
         };
         let mut reference_row = true;
         for spp in spps {
-            let images = match load_view_with(&plan.dataset, view, spp, plan.aux, variance_needed || variance_wanted) {
-                Err(e) if variance_wanted && !variance_needed => {
-                    unreadable_variance.push(format!("{name} at {spp} spp ({e})"));
-                    load_view_with(&plan.dataset, view, spp, plan.aux, false)?
+            // The dataset's noisy render, then its repeats (`hush dataset --test-repeats`): each method's
+            // metrics are their means; times, previews and pictures are the first render's.
+            let renders = view.renders_at(spp);
+            let mut metrics: Vec<Vec<hush_eval::Metrics>> = vec![Vec::new(); methods.len()];
+            let mut first: Vec<Option<(Option<f64>, String)>> = vec![None; methods.len()];
+            for (i, &render) in renders.iter().enumerate() {
+                let what =
+                    if i == 0 { format!("{name} at {spp} spp") } else { format!("{name} at {spp} spp, repeat {i}") };
+                let images =
+                    match load_render_with(&plan.dataset, view, render, plan.aux, variance_needed || variance_wanted) {
+                        Err(e) if variance_wanted && !variance_needed => {
+                            unreadable_variance.push(format!("{what} ({e})"));
+                            load_render_with(&plan.dataset, view, render, plan.aux, false)?
+                        }
+                        loaded => loaded?,
+                    };
+                let exposure = exposure_of(&images.reference)?;
+                let preview = |method: &str, image: &Image| -> Result<String> {
+                    let file = format!("{name}_{spp:06}_{}.png", file_safe(method));
+                    write_png_preview(previews.join(&file), image, exposure)?;
+                    Ok(format!("previews/{file}"))
+                };
+                if i == 0 && std::mem::take(&mut reference_row) {
+                    let mut row =
+                        Row::new(&name, REFERENCE, view.reference.spp, &compare(&images.reference, &images.reference)?);
+                    row.render_seconds = Some(view.reference.render_seconds);
+                    row.preview = Some(preview(REFERENCE, &images.reference)?);
+                    report.rows.push(row);
                 }
-                loaded => loaded?,
-            };
-            let exposure = exposure_of(&images.reference)?;
-            let preview = |method: &str, image: &Image| -> Result<String> {
-                let file = format!("{name}_{spp:06}_{}.png", file_safe(method));
-                write_png_preview(previews.join(&file), image, exposure)?;
-                Ok(format!("previews/{file}"))
-            };
-            if std::mem::take(&mut reference_row) {
-                let mut row =
-                    Row::new(&name, REFERENCE, view.reference.spp, &compare(&images.reference, &images.reference)?);
-                row.render_seconds = Some(view.reference.render_seconds);
-                row.preview = Some(preview(REFERENCE, &images.reference)?);
-                report.rows.push(row);
-            }
-            let render_seconds = view.noisy_at(spp).map(|r| r.render_seconds);
-            let mut outputs: Vec<(String, Image)> = Vec::new();
-            for method in &methods {
-                if report.skipped.iter().any(|k| k.method == method.name()) {
-                    continue;
-                }
-                let run = method
-                    .run(&images, plan.timing_runs)
-                    .with_context(|| format!("{} on {name} at {spp} spp", method.name()))?;
-                let (image, denoise_seconds) = match run {
-                    Run::Done(image, seconds) => (image, seconds),
-                    Run::Skipped(skipped) => {
-                        observer.note(&format!("{}: skipped: {}", skipped.method, skipped.reason));
-                        report.skipped.push(skipped);
+                let mut outputs: Vec<(String, Image)> = Vec::new();
+                for (m, method) in methods.iter().enumerate() {
+                    if report.skipped.iter().any(|k| k.method == method.name()) {
                         continue;
                     }
-                };
-                let mut row = Row::new(&name, method.name(), spp, &compare(&image, &images.reference)?);
-                row.render_seconds = render_seconds;
-                row.denoise_seconds = denoise_seconds;
-                row.preview = Some(preview(method.name(), &image)?);
-                report.rows.push(row);
-                if spp == picture_spp {
-                    outputs.push((method.name().to_string(), image));
+                    // Repeats only score: one warm run each, untimed.
+                    let runs = if i == 0 { plan.timing_runs } else { 1 };
+                    let run = method.run(&images, runs).with_context(|| format!("{} on {what}", method.name()))?;
+                    let (image, denoise_seconds) = match run {
+                        Run::Done(image, seconds) => (image, seconds),
+                        Run::Skipped(skipped) => {
+                            observer.note(&format!("{}: skipped: {}", skipped.method, skipped.reason));
+                            report.skipped.push(skipped);
+                            continue;
+                        }
+                    };
+                    metrics[m].push(compare(&image, &images.reference)?);
+                    if i == 0 {
+                        first[m] = Some((denoise_seconds, preview(method.name(), &image)?));
+                        if spp == picture_spp {
+                            outputs.push((method.name().to_string(), image));
+                        }
+                    }
+                }
+                if i == 0 && spp == picture_spp {
+                    report.figures.extend(pictures_of(
+                        &picture_dir,
+                        &name,
+                        spp,
+                        &outputs,
+                        &images.reference,
+                        exposure,
+                    )?);
+                    report.viewers.push(Viewer::write(&plan.out, &name, spp, &outputs, &images.reference, exposure)?);
                 }
             }
-            if spp == picture_spp {
-                report.figures.extend(pictures_of(&picture_dir, &name, spp, &outputs, &images.reference, exposure)?);
-                report.viewers.push(Viewer::write(&plan.out, &name, spp, &outputs, &images.reference, exposure)?);
+            let render_seconds = view.noisy_at(spp).map(|r| r.render_seconds);
+            for (m, method) in methods.iter().enumerate() {
+                // A method skipped on a later render is left out of the case: its mean would be over fewer renders.
+                if report.skipped.iter().any(|k| k.method == method.name()) || metrics[m].len() != renders.len() {
+                    continue;
+                }
+                let (Some((denoise_seconds, preview)), Some(mut row)) =
+                    (first[m].take(), Row::of_renders(&name, method.name(), spp, &metrics[m]))
+                else {
+                    continue;
+                };
+                row.render_seconds = render_seconds;
+                row.denoise_seconds = denoise_seconds;
+                row.preview = Some(preview);
+                report.rows.push(row);
             }
         }
     }
@@ -345,8 +387,11 @@ fn cpu_model() -> Option<String> {
 
 /// How the evaluated noisy inputs placed their samples in each pixel, as the manifest records it.
 fn pixel_positions(views: &[hush_dataset::ViewRecord]) -> String {
-    let samplers: std::collections::BTreeSet<Option<&str>> =
-        views.iter().flat_map(|v| v.noisy.iter().map(|r| r.pixel_sampler.as_deref())).collect();
+    let samplers: std::collections::BTreeSet<Option<&str>> = views
+        .iter()
+        .flat_map(|v| v.noisy.iter().chain(v.repeats.iter().flatten()))
+        .map(|r| r.pixel_sampler.as_deref())
+        .collect();
     let name = |s: &Option<&str>| s.unwrap_or("independent").to_string();
     match samplers.iter().collect::<Vec<_>>()[..] {
         [one] => format!("{} (`--pixel-sampler {}`)", name(one), name(one)),
