@@ -189,6 +189,24 @@ struct NoisyNames {
     variance: String,
 }
 
+impl NoisyNames {
+    /// Render `k` of a view's ladder at `spp`: the noisy render (`k` = 0, in OIDN's layout) or repeat `k`.
+    fn of(scene: &str, view: &str, spp: u32, k: u32) -> NoisyNames {
+        match k {
+            0 => NoisyNames {
+                file: Layout::noisy_name(scene, view, spp),
+                aux: AuxFiles::from_fn(|kind| Layout::noisy_aux_name(scene, view, spp, kind)),
+                variance: Layout::noisy_variance_name(scene, view, spp),
+            },
+            _ => NoisyNames {
+                file: Layout::repeat_name(scene, view, spp, k, "hdr"),
+                aux: AuxFiles::from_fn(|kind| Layout::repeat_name(scene, view, spp, k, kind.extension())),
+                variance: Layout::repeat_name(scene, view, spp, k, "var"),
+            },
+        }
+    }
+}
+
 /// One noisy render: `kept` where a previous run finished it with these files, seed and sampler (its beauty,
 /// its own features and its variance all valid), else rendered now and written. Whether it was rendered.
 #[allow(clippy::too_many_arguments)]
@@ -276,43 +294,33 @@ pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u3
 
     let sampler = sampler_record(plan.pixel_sampler);
     let spps = plan.ladder();
-    for &spp in &spps {
-        let seed = render_seed(plan.seed, name, v, &format!("noisy-{spp}"));
-        let names = NoisyNames {
-            file: Layout::noisy_name(name, &view, spp),
-            aux: AuxFiles::from_fn(|kind| Layout::noisy_aux_name(name, &view, spp, kind)),
-            variance: Layout::noisy_variance_name(name, &view, spp),
-        };
-        let kept = previous.as_ref().and_then(|p| p.noisy.iter().find(|r| r.spp == spp && r.seed == seed));
-        let (record, rendered) = noisy_render(ctx, &scene, &camera, kept, names, spp, seed, &label)?;
-        progress.noisy.push(record);
-        if rendered {
-            ctx.record(&progress)?;
-        }
-        ctx.advance();
-    }
-    // Test views: the same ladder again with other seeds, so that an evaluation can average over renders.
-    let repeats = if split == Split::Test { plan.test_repeats.max(1) - 1 } else { 0 };
-    if repeats > 0 {
+    // A test view renders the ladder `test_repeats` times in all (repeat k ≥ 1 with other seeds, under
+    // repeats/), so that an evaluation can average over renders.
+    let renders = if split == Split::Test { plan.test_repeats.max(1) } else { 1 };
+    if renders > 1 {
         std::fs::create_dir_all(ctx.layout.path(Layout::REPEATS))
             .with_context(|| format!("creating {}", ctx.layout.path(Layout::REPEATS).display()))?;
     }
-    for k in 1..=repeats {
-        progress.repeats.push(Vec::new());
+    for k in 0..renders {
+        let repeat = k as usize;
+        if repeat > 0 {
+            progress.repeats.push(Vec::new());
+        }
         for &spp in &spps {
-            let seed = render_seed(plan.seed, name, v, &format!("noisy-{spp}-repeat-{k}"));
-            let names = NoisyNames {
-                file: Layout::repeat_name(name, &view, spp, k, "hdr"),
-                aux: AuxFiles::from_fn(|kind| Layout::repeat_name(name, &view, spp, k, kind.extension())),
-                variance: Layout::repeat_name(name, &view, spp, k, "var"),
+            let seed = match k {
+                0 => render_seed(plan.seed, name, v, &format!("noisy-{spp}")),
+                _ => render_seed(plan.seed, name, v, &format!("noisy-{spp}-repeat-{k}")),
             };
-            let kept = previous
-                .as_ref()
-                .and_then(|p| p.repeats.get(k as usize - 1))
-                .and_then(|ladder| ladder.iter().find(|r| r.spp == spp && r.seed == seed));
-            let label = format!("{label} repeat {k}");
+            let recorded =
+                previous.as_ref().and_then(|p| if repeat == 0 { Some(&p.noisy) } else { p.repeats.get(repeat - 1) });
+            let kept = recorded.and_then(|ladder| ladder.iter().find(|r| r.spp == spp && r.seed == seed));
+            let label = if repeat == 0 { label.clone() } else { format!("{label} repeat {k}") };
+            let names = NoisyNames::of(name, &view, spp, k);
             let (record, rendered) = noisy_render(ctx, &scene, &camera, kept, names, spp, seed, &label)?;
-            progress.repeats[k as usize - 1].push(record);
+            match repeat {
+                0 => progress.noisy.push(record),
+                _ => progress.repeats[repeat - 1].push(record),
+            }
             if rendered {
                 ctx.record(&progress)?;
             }
