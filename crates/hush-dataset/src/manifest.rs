@@ -498,6 +498,9 @@ impl Manifest {
     pub fn upsert(&mut self, mut view: ViewRecord) -> Result<Option<ViewRecord>> {
         view.validate()?;
         view.noisy.sort_by_key(|r| r.spp);
+        for ladder in &mut view.repeats {
+            ladder.sort_by_key(|r| r.spp);
+        }
         self.pending.retain(|p| !(p.scene == view.scene && p.view == view.view));
         match self.views.iter_mut().find(|v| v.scene == view.scene && v.view == view.view) {
             Some(old) => Ok(Some(std::mem::replace(old, view))),

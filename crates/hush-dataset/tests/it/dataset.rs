@@ -99,9 +99,16 @@ fn manifest_round_trip_and_upsert() {
 
     let mut m = Manifest::default();
     assert!(m.upsert(record("cbox", "v1", &[16, 4], 8)).unwrap().is_none());
-    let mut test_view = record("sponza", "v0", &[4], 8);
+    let mut test_view = record("sponza", "v0", &[4, 16], 8);
     test_view.split = Split::Test;
+    // A repeat's ladder is validated and sorted as the noisy ladder is.
+    test_view.repeats = vec![record("sponza", "v0", &[4, 4], 8).noisy];
+    assert!(m.upsert(test_view.clone()).is_err(), "duplicate spp in a repeat");
+    test_view.repeats = vec![record("sponza", "v0", &[16, 4], 8).noisy];
     assert!(m.upsert(test_view).unwrap().is_none());
+    let spps = |v: &ViewRecord| v.repeats[0].iter().map(|r| r.spp).collect::<Vec<_>>();
+    assert_eq!(spps(m.get("sponza", "v0").unwrap()), [4, 16]);
+    assert_eq!(m.get("sponza", "v0").unwrap().renders_at(16).len(), 2);
     let replaced = m.upsert(record("cbox", "v1", &[4, 16, 64], 8)).unwrap().expect("same scene+view is replaced");
     assert_eq!(replaced.noisy.len(), 2);
     assert_eq!(m.views.len(), 2);
