@@ -1252,48 +1252,6 @@ fn a_dataset_renders_again_what_another_pixel_sampler_rendered() {
     assert!(err.contains("unknown pixel sampler 'sobol' (independent or stratified)"), "{err}");
 }
 
-/// A dataset records the tracer's feature convention with each render's features: renders recorded without it
-/// (every manifest from before convention 2, where a light seen directly had its BSDF's albedo) are rendered
-/// again with the same seeds, so that one dataset never mixes conventions: the beauty images come back the
-/// same, the albedo now 0 on the light; the reference, which has no features, is kept.
-#[test]
-fn a_dataset_renders_again_features_of_an_older_convention() {
-    let ds = scratch("features-version").join("ds");
-    let args = cbox_dataset_args(&ds, "1", "2,4");
-    let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    expect_success(&args);
-    let manifest = manifest_of(&ds);
-    let view = &manifest["views"][0];
-    let records = |view: &serde_json::Value| {
-        let mut all: Vec<serde_json::Value> = view["noisy"].as_array().unwrap().to_vec();
-        all.push(view["aux"].clone());
-        all
-    };
-    assert!(records(view).iter().all(|r| r["features_version"] == 2), "{view}");
-    let color = std::fs::read(ds.join("cbox_v000_000004.hdr.exr")).unwrap();
-    // The manifest as an older hush wrote it.
-    let mut older = manifest.clone();
-    let older_view = &mut older["views"][0];
-    for r in older_view["noisy"].as_array_mut().unwrap() {
-        r.as_object_mut().unwrap().remove("features_version");
-    }
-    older_view["aux"].as_object_mut().unwrap().remove("features_version");
-    std::fs::write(ds.join("manifest.json"), serde_json::to_string_pretty(&older).unwrap()).unwrap();
-    let stderr = expect_success(&args);
-    assert!(stderr.contains("3 images rendered"), "2 noisy renders and the features, not the reference: {stderr}");
-    assert!(records(&manifest_of(&ds)["views"][0]).iter().all(|r| r["features_version"] == 2), "recorded again");
-    assert_eq!(std::fs::read(ds.join("cbox_v000_000004.hdr.exr")).unwrap(), color, "same seed, same image");
-    let stderr = expect_success(&args);
-    assert!(stderr.contains("0 images rendered"), "all kept: {stderr}");
-    // The brightest pixel, where every sample saw the light, has albedo 0.
-    let beauty = hush_dataset::read_rgb(ds.join("cbox_v000_000004.hdr.exr")).unwrap();
-    let albedo = hush_dataset::read_rgb(ds.join("cbox_v000_000004.alb.exr")).unwrap();
-    let brightest = beauty.data.chunks_exact(3).map(|p| p[0]).fold(0.0f32, f32::max);
-    let on_light: Vec<usize> = (0..beauty.data.len() / 3).filter(|&i| beauty.data[3 * i] == brightest).collect();
-    assert!(!on_light.is_empty());
-    assert!(on_light.iter().all(|&i| albedo.data[3 * i..3 * i + 3] == [0.0; 3]), "the light's albedo is 0");
-}
-
 /// `--test-repeats 3` renders each test view's ladder twice more, with their own seeds, under repeats/ (the
 /// training view gets none); a rerun keeps them, a lost one is rendered again; `hush eval` scores each case by the
 /// mean over the three renders and lists each render's PSNR.

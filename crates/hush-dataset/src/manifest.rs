@@ -54,10 +54,6 @@ pub struct RenderRecord {
     /// run's sampler.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pixel_sampler: Option<String>,
-    /// The tracer's feature convention its auxiliary images follow (`hush_trace::FEATURES_VERSION`); `None`:
-    /// 1, every render from before it was recorded. A resume renders again what differs from the tracer's.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub features_version: Option<u32>,
 }
 
 /// The four auxiliary images of one render.
@@ -105,9 +101,6 @@ pub struct AuxRecord {
     /// run's sampler.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pixel_sampler: Option<String>,
-    /// The tracer's feature convention (as [`RenderRecord::features_version`]); `None`: 1.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub features_version: Option<u32>,
 }
 
 impl AuxRecord {

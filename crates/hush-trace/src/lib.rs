@@ -31,13 +31,6 @@ pub use render::{
 pub use scan::SceneLiterals;
 pub use upload::{FLAT_SCAN_MAX_TRIANGLES, KernelFeatures, flat_scan_cost};
 
-/// The convention of the auxiliary features a render writes, recorded with every stored render so that a
-/// dataset never mixes conventions (a resume renders older ones again).
-/// 1: every surface's features are its BSDF's. 2: a light seen from its emitting side has albedo, diffuse and
-/// specular 0, as the environment has, so that the features mark where a light ends even where its BSDF
-/// matches its surroundings' (the Cornell box's light and ceiling); its normal is kept.
-pub const FEATURES_VERSION: u32 = 2;
-
 /// Why a render could not run.
 #[derive(Debug, thiserror::Error)]
 pub enum TraceError {

@@ -426,9 +426,7 @@ struct Sample {
 // k_s = specular reflectance × Fresnel at normal incidence. Plastic (smooth or rough): k_d =
 // diffuse reflectance, k_s = specular reflectance × the coat's Fresnel at normal incidence.
 // Rough dielectric: k_d = 0, k_s = mean of the specular reflectance and transmittance.
-// Albedo = min(k_d + k_s, 1). A ray that escapes to the environment writes 0 to every feature, and a
-// light seen from its emitting side writes 0 to albedo, diffuse and specular (its normal as any surface's):
-// its pixel's value is emission, not shading, and a feature edge marks where it ends (FEATURES_VERSION 2).
+// Albedo = min(k_d + k_s, 1). A ray that escapes to the environment writes 0 to every feature.
 fn features(m: Material) -> mat2x3<f32> {
     let kind = mat_kind(m);
     if kind == KIND_DIFFUSE {
@@ -586,12 +584,6 @@ fn bounce(st: ptr<function, PathState>) -> bool {
         (*st).out.diffuse = f[0];
         (*st).out.specular = f[1];
         (*st).out.albedo = min(f[0] + f[1], vec3<f32>(1.0));
-        // A light seen directly: no reflectance features (see `features`).
-        if mat.emission.w > 0.5 && front {
-            (*st).out.albedo = vec3<f32>(0.0);
-            (*st).out.diffuse = vec3<f32>(0.0);
-            (*st).out.specular = vec3<f32>(0.0);
-        }
         (*st).out.normal = select(-ns, ns, front);
         (*st).features_done = true;
     }

@@ -15,7 +15,6 @@ pub fn record(scene: &str, view: &str, spps: &[u32], size: u32) -> ViewRecord {
         aux: Some(AuxFiles::from_fn(|kind| Layout::noisy_aux_name(scene, view, spp, kind))),
         variance: None,
         pixel_sampler: None,
-        features_version: Some(2),
     };
     ViewRecord {
         scene: scene.into(),
@@ -48,7 +47,6 @@ pub fn record(scene: &str, view: &str, spps: &[u32], size: u32) -> ViewRecord {
             max_depth: Some(8),
             files: AuxFiles::from_fn(|kind| Layout::aux_name(scene, view, kind)),
             pixel_sampler: None,
-            features_version: Some(2),
         },
         repeats: Vec::new(),
     }

@@ -12,7 +12,7 @@ use hush_dataset::{
 };
 use hush_hash::SplitMix64;
 use hush_scene::{Camera, PixelFilter, Scene};
-use hush_trace::{FEATURES_VERSION, RenderOutput, RenderSettings, Renderer};
+use hush_trace::{RenderOutput, RenderSettings, Renderer};
 
 use super::scenes::JobScene;
 use super::{DatasetPlan, sampler_record};
@@ -231,7 +231,6 @@ fn noisy_render(
         r.file == file
             && r.aux.as_ref() == Some(&own)
             && r.pixel_sampler == sampler
-            && r.features_version == Some(FEATURES_VERSION)
             && files.into_iter().all(|f| ctx.valid(f, camera))
     };
     if let Some(r) = kept.filter(finished) {
@@ -252,7 +251,6 @@ fn noisy_render(
         aux: Some(own),
         variance: Some(variance),
         pixel_sampler: sampler,
-        features_version: Some(FEATURES_VERSION),
     };
     Ok((record, true))
 }
@@ -338,7 +336,6 @@ pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u3
             && a.max_depth == Some(scene.max_depth)
             && a.files == clean
             && a.pixel_sampler == sampler
-            && a.features_version == Some(FEATURES_VERSION)
             && AuxKind::ALL.iter().all(|&k| ctx.valid(clean.file(k), &camera))
     });
     let aux = match kept {
@@ -358,7 +355,6 @@ pub(crate) fn render_view(ctx: &mut Ctx, known: &Manifest, job: &JobScene, v: u3
                 max_depth: Some(scene.max_depth),
                 files: clean,
                 pixel_sampler: sampler.clone(),
-                features_version: Some(FEATURES_VERSION),
             }
         }
     };
