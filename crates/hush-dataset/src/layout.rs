@@ -224,17 +224,20 @@ pub fn load_view_with(
             view.noisy.iter().map(|r| r.spp).collect::<Vec<_>>()
         ))
     })?;
-    load_render_with(root, view, noisy, aux, variance)
+    load_render_with(root, view, noisy, aux, variance, None)
 }
 
 /// [`load_view_with`] for one render of `view` (its noisy render at some spp or a repeat of it,
-/// [`ViewRecord::renders_at`]).
+/// [`ViewRecord::renders_at`]). `reference`: the view's reference as an earlier load returned it, so that a
+/// caller going through several renders of a view reads it once; `None` reads its file. Either way its size
+/// is checked with the files'.
 pub fn load_render_with(
     root: impl AsRef<Path>,
     view: &ViewRecord,
     noisy: &RenderRecord,
     aux: AuxSource,
     variance: bool,
+    reference: Option<Image>,
 ) -> Result<ViewImages> {
     let layout = Layout::new(root.as_ref());
     let spp = noisy.spp;
@@ -254,10 +257,18 @@ pub fn load_render_with(
             }
         },
     };
-    let files = [noisy.file.as_str(), features[0], features[1], features[2], features[3], view.reference.file.as_str()];
+    let reference_file = view.reference.file.as_str();
+    let files = [noisy.file.as_str(), features[0], features[1], features[2], features[3], reference_file];
     let files: Vec<&str> = files.into_iter().chain(noisy.variance.as_deref().filter(|_| variance)).collect();
+    let mut reference = reference;
     let mut images = Vec::with_capacity(files.len());
     for &file in &files {
+        if file == reference_file
+            && let Some(given) = reference.take()
+        {
+            images.push(given);
+            continue;
+        }
         let path = layout.path(file);
         let image = read_rgb(&path)?;
         if image.channels != 3 {

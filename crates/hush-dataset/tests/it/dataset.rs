@@ -1,7 +1,7 @@
 use hush_dataset::{
     AuxFiles, AuxKind, AuxRecord, AuxSource, CameraRecord, DatasetConfig, FireflyRecord, Layout, Manifest, PendingView,
     ReferenceRecord, RenderRecord, SceneEntry, Split, ViewGeneration, ViewRecord, check_dataset, link_or_copy,
-    load_view, load_view_with, temp_target, write_rgb,
+    load_render_with, load_view, load_view_with, temp_target, write_rgb,
 };
 
 use crate::{TempDir, ramp};
@@ -148,6 +148,21 @@ fn load_view_reads_all_images() {
 
     let err = load_view(dir.path(), &view, 32, AuxSource::Noisy).unwrap_err().to_string();
     assert!(err.contains("32 spp") && err.contains("[4, 16]"), "{err}");
+
+    // A render with the reference an earlier load returned: that image, its file not read again (here gone),
+    // its size checked with the files'.
+    std::fs::remove_file(dir.join(&view.reference.file)).unwrap();
+    let err = load_render_with(dir.path(), &view, &view.noisy[0], AuxSource::Noisy, false, None).unwrap_err();
+    assert!(err.to_string().contains("cbox_v0_ref.hdr.exr"), "{err}");
+    let given = ramp(8, 8, 3, 30.0);
+    let images =
+        load_render_with(dir.path(), &view, &view.noisy[0], AuxSource::Noisy, false, Some(given.clone())).unwrap();
+    assert_eq!((images.color, images.reference, images.albedo), (ramp(8, 8, 3, 0.0), given, ramp(8, 8, 3, 10.0)));
+    let err = load_render_with(dir.path(), &view, &view.noisy[0], AuxSource::Noisy, false, Some(ramp(8, 6, 3, 0.0)))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("cbox_v0_ref.hdr.exr: 8x6") && err.contains("camera is 8x8"), "{err}");
+    write_rgb(dir.join(&view.reference.file), &ramp(8, 8, 3, 2.0)).unwrap();
 
     // A render's variance is read where the manifest records one and it is asked for, with either auxiliary
     // source; not asked for, a lost variance file stops nothing.

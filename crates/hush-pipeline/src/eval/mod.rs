@@ -281,6 +281,8 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
             bail!("view {name} has no noisy render at the requested spp {:?}", plan.spp);
         };
         let mut reference_row = true;
+        // Read once per view, not once per render.
+        let mut reference: Option<Image> = None;
         for spp in spps {
             // The dataset's noisy render, then its repeats (`hush dataset --test-repeats`): each method's
             // metrics are their means; times, previews and pictures are the first render's.
@@ -290,14 +292,19 @@ pub fn evaluate(plan: &EvalPlan, observer: &dyn Observer) -> Result<Report> {
             for (i, &render) in renders.iter().enumerate() {
                 let what =
                     if i == 0 { format!("{name} at {spp} spp") } else { format!("{name} at {spp} spp, repeat {i}") };
-                let images =
-                    match load_render_with(&plan.dataset, view, render, plan.aux, variance_needed || variance_wanted) {
-                        Err(e) if variance_wanted && !variance_needed => {
-                            unreadable_variance.push(format!("{what} ({e})"));
-                            load_render_with(&plan.dataset, view, render, plan.aux, false)?
-                        }
-                        loaded => loaded?,
-                    };
+                let load = |variance: bool| {
+                    load_render_with(&plan.dataset, view, render, plan.aux, variance, reference.clone())
+                };
+                let images = match load(variance_needed || variance_wanted) {
+                    Err(e) if variance_wanted && !variance_needed => {
+                        unreadable_variance.push(format!("{what} ({e})"));
+                        load(false)?
+                    }
+                    loaded => loaded?,
+                };
+                if reference.is_none() {
+                    reference = Some(images.reference.clone());
+                }
                 let exposure = exposure_of(&images.reference)?;
                 let preview = |method: &str, image: &Image| -> Result<String> {
                     let file = format!("{name}_{spp:06}_{}.png", file_safe(method));
