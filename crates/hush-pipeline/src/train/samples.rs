@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use anyhow::{Context, Result, bail};
-use hush_dataset::{Image, ViewRecord, load_view_with};
+use hush_dataset::{Image, ViewRecord, load_render_with};
 use hush_hash::fnv1a;
 use hush_net::transfer::Transfer;
 use hush_train::{PREPARATION_VERSION, TrainSample, decode_samples, round_trip};
@@ -37,11 +37,11 @@ pub(crate) fn load_split(
     let records: Vec<_> = views
         .iter()
         .flat_map(|&view| {
-            view.noisy.iter().filter(|r| cfg.spp.is_empty() || cfg.spp.contains(&r.spp)).map(move |r| (view, r.spp))
+            view.noisy.iter().filter(|r| cfg.spp.is_empty() || cfg.spp.contains(&r.spp)).map(move |r| (view, r))
         })
         .collect();
     let names: Vec<String> =
-        records.iter().map(|(view, spp)| format!("{}_{}@{spp}spp", view.scene, view.view)).collect();
+        records.iter().map(|(view, r)| format!("{}_{}@{}spp", view.scene, view.view, r.spp)).collect();
     // The file is named by what the samples are (features, transfer, split, views and spp), so a changed
     // dataset replaces its cache rather than adding one; the key inside also covers the records of this
     // split's views (files, seeds, sizes) and how samples are prepared, and a mismatch rebuilds the file.
@@ -55,9 +55,17 @@ pub(crate) fn load_split(
     let path = cfg.dataset.join("cache").join(format!("{role:?}-{:016x}.f16", fnv1a(what.as_bytes())).to_lowercase());
     let samples = cached_samples(&path, &key, observer, || {
         let mut samples = Vec::new();
-        for &(view, spp) in &records {
-            let variance = features.aux.contains(&hush_net::Feature::Variance);
-            let images = load_view_with(&cfg.dataset, view, spp, cfg.aux, variance)?;
+        let variance = features.aux.contains(&hush_net::Feature::Variance);
+        // A view's renders follow each other: its reference is read once.
+        let mut reference: Option<(&ViewRecord, Image)> = None;
+        for &(view, render) in &records {
+            let spp = render.spp;
+            let known = reference.as_ref().filter(|(v, _)| std::ptr::eq(*v, view)).map(|(_, image)| image.clone());
+            let read = known.is_none();
+            let images = load_render_with(&cfg.dataset, view, render, cfg.aux, variance, known)?;
+            if read {
+                reference = Some((view, images.reference.clone()));
+            }
             let aux = features
                 .aux
                 .iter()
