@@ -127,6 +127,7 @@ pub fn summary_json(w: &Written, seed: u64, index: u64, options: &GeneratorOptio
         "attempt": w.attempt,
         "scene_seed": w.scene.seed,
         "features": options.ingredients.describe(),
+        "light_material": options.light_material.name(),
         "style": w.scene.style,
         "shapes": w.scene.shapes.len(),
         "materials": classes,

@@ -113,6 +113,37 @@ pub struct GeneratorOptions {
     /// The film's pixel filter (rooms of the dataset: box, as OIDN's training data). Another filter
     /// correlates the noise of neighbouring pixels, and turns a firefly into a blob of several pixels.
     pub filter: PixelFilter,
+    /// The surface of a room's ceiling panels and lamps where they do not emit. The random draws are the
+    /// same either way: a room with [`LightMaterial::Ceiling`] is the room with [`LightMaterial::Black`]
+    /// whose ceiling lights look like the ceiling around them.
+    pub light_material: LightMaterial,
+}
+
+/// What a room's ceiling panels and lamps are made of (bulbs and suns stay black).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum LightMaterial {
+    /// Black: a light seen directly has albedo 0, so its edge shows in the albedo feature.
+    #[default]
+    Black,
+    /// The ceiling's own material, as the Cornell box's light: albedo and normal show no edge where the light
+    /// meets the ceiling, and only the colour tells them apart.
+    Ceiling,
+}
+
+impl LightMaterial {
+    pub const ALL: [LightMaterial; 2] = [LightMaterial::Black, LightMaterial::Ceiling];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            LightMaterial::Black => "black",
+            LightMaterial::Ceiling => "ceiling",
+        }
+    }
+
+    /// The light material named `name` ([`LightMaterial::name`]).
+    pub fn parse(name: &str) -> Option<LightMaterial> {
+        LightMaterial::ALL.into_iter().find(|m| m.name() == name)
+    }
 }
 
 impl GeneratorOptions {
@@ -132,6 +163,7 @@ impl Default for GeneratorOptions {
             borrow_meshes: None,
             style: None,
             filter: PixelFilter::Box,
+            light_material: LightMaterial::Black,
         }
     }
 }
@@ -383,6 +415,8 @@ struct Gen<'a> {
     materials: usize,
     environment: Option<String>,
     borrowable: Vec<(PathBuf, Vec3, Vec3)>,
+    /// The ceiling's material, once the room's shell is built.
+    ceiling: Option<Bsdf>,
 }
 
 /// A BSDF written into the XML, with what it is.
@@ -419,6 +453,7 @@ impl<'a> Gen<'a> {
             materials: 0,
             environment: None,
             borrowable: options.borrow_meshes.as_deref().map(borrowable_meshes).unwrap_or_default(),
+            ceiling: None,
         }
     }
 
@@ -454,10 +489,14 @@ impl<'a> Gen<'a> {
         let _ = writeln!(head, "<?xml version=\"1.0\" encoding=\"utf-8\"?>");
         let _ = writeln!(
             head,
-            "<!-- hush procedural scene: generator {GENERATOR_VERSION}, seed {}, style {}, features {} -->",
+            "<!-- hush procedural scene: generator {GENERATOR_VERSION}, seed {}, style {}, features {}{} -->",
             self.seed,
             self.style.name(),
-            o.ingredients.describe()
+            o.ingredients.describe(),
+            match o.light_material {
+                LightMaterial::Black => String::new(),
+                m => format!(", lights {}", m.name()),
+            }
         );
         let _ = writeln!(head, "<scene version=\"3.0.0\">");
         let _ = writeln!(head, "  <integrator type=\"path\"><integer name=\"max_depth\" value=\"8\"/></integrator>");
@@ -704,6 +743,7 @@ impl<'a> Gen<'a> {
         self.rectangle("floor", half, [Vec3::X * half.x, Vec3::Z * half.z], Vec3::Y, &floor, None);
         let ceiling = self.surface_material();
         self.rectangle("ceiling", half + Vec3::Y * h, [Vec3::X * half.x, Vec3::Z * half.z], -Vec3::Y, &ceiling, None);
+        self.ceiling = Some(ceiling);
         let wall = self.surface_material();
         // Walls: (corner, direction along the wall, length, inward normal).
         let walls = [
@@ -774,6 +814,14 @@ impl<'a> Gen<'a> {
         self.diffuse(Vec3::ZERO)
     }
 
+    /// The surface of a ceiling panel or lamp ([`GeneratorOptions::light_material`]).
+    fn light_surface(&mut self) -> Bsdf {
+        match (self.options.light_material, &self.ceiling) {
+            (LightMaterial::Ceiling, Some(ceiling)) => ceiling.clone(),
+            _ => self.black(),
+        }
+    }
+
     fn wall_piece(&mut self, p0: Vec3, t: Vec3, n: Vec3, a: [f32; 2], b: [f32; 2], bsdf: &Bsdf) {
         if a[1] - a[0] < 1e-3 || b[1] - b[0] < 1e-3 {
             return;
@@ -802,15 +850,15 @@ impl<'a> Gen<'a> {
             let (hx, hz) = (self.rng.range(0.3, 1.0), self.rng.range(0.3, 1.0));
             let c = self.ceiling_point(hx.max(hz) + 0.1);
             let radiance = warm(&mut self.rng) * self.rng.range(2.0, 12.0);
-            let black = self.black();
-            self.rectangle("panel", c, [Vec3::X * hx, Vec3::Z * hz], -Vec3::Y, &black, Some(radiance));
+            let surface = self.light_surface();
+            self.rectangle("panel", c, [Vec3::X * hx, Vec3::Z * hz], -Vec3::Y, &surface, Some(radiance));
             self.lights.push(LightKind::LargeArea);
         }
         for _ in 0..small {
             let size = self.rng.range(0.05, 0.2);
             let radiance = warm(&mut self.rng)
                 * if self.style == Style::Dark { self.rng.range(3.0, 20.0) } else { self.rng.range(20.0, 200.0) };
-            let black = self.black();
+            let surface = self.light_surface();
             if self.rng.chance(0.5) {
                 let c = self.ceiling_point(size + 0.1);
                 // A disk faces +z: turned about +x by 90° it faces down.
@@ -819,10 +867,10 @@ impl<'a> Gen<'a> {
                     v3(Vec3::new(size, size, 1.0)),
                     v3(c)
                 );
-                self.shape("disk", "lamp", &t, &black, "", Some(radiance));
+                self.shape("disk", "lamp", &t, &surface, "", Some(radiance));
             } else {
                 let c = self.ceiling_point(size + 0.1);
-                self.rectangle("lamp", c, [Vec3::X * size, Vec3::Z * size], -Vec3::Y, &black, Some(radiance));
+                self.rectangle("lamp", c, [Vec3::X * size, Vec3::Z * size], -Vec3::Y, &surface, Some(radiance));
             }
             self.lights.push(LightKind::SmallArea);
         }

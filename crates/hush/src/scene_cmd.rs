@@ -10,7 +10,7 @@ use clap::{Args, Subcommand};
 use hush_dataset::write_atomic;
 use hush_pipeline::procedural::{generate_into, summary_json};
 use hush_scene::PixelFilter;
-use hush_scene::procedural::{GeneratorOptions, Style};
+use hush_scene::procedural::{GeneratorOptions, LightMaterial, Style};
 use hush_trace::Renderer;
 
 use crate::cli::GeneratorArgs;
@@ -60,6 +60,18 @@ pub struct GenerateArgs {
     /// The film's pixel filter: box, tent (radius 1) or gaussian (σ 0.5), as Mitsuba's.
     #[arg(long, default_value = "box", value_parser = parse_filter)]
     pub filter: PixelFilter,
+    /// What a room's ceiling panels and lamps are made of: black (their edge shows in the albedo) or
+    /// ceiling (the ceiling's material, as the Cornell box's light: only the colour shows their edge).
+    /// The room is otherwise the same.
+    #[arg(long, default_value = "black", value_parser = parse_light_material)]
+    pub light_material: LightMaterial,
+}
+
+fn parse_light_material(name: &str) -> Result<LightMaterial, String> {
+    LightMaterial::parse(name).ok_or_else(|| {
+        let names: Vec<_> = LightMaterial::ALL.iter().map(|m| m.name()).collect();
+        format!("unknown light material '{name}': use {}", names.join(", "))
+    })
 }
 
 fn parse_filter(name: &str) -> Result<PixelFilter, String> {
@@ -110,7 +122,12 @@ fn generate(args: GenerateArgs) -> Result<()> {
     if args.out.extension().is_none_or(|e| !e.eq_ignore_ascii_case("xml")) {
         bail!("--out {}: the scene is Mitsuba XML; name the file *.xml", args.out.display());
     }
-    let options = GeneratorOptions { style: args.style, filter: args.filter, ..args.generator.options(256, 256) };
+    let options = GeneratorOptions {
+        style: args.style,
+        filter: args.filter,
+        light_material: args.light_material,
+        ..args.generator.options(256, 256)
+    };
     let gpu = if args.no_probe { None } else { Some(crate::open_gpu()?) };
     let renderer = gpu.as_ref().map(Renderer::new).transpose()?;
     let written = generate_into(&args.out, args.seed, 0, &options, renderer.as_ref())?;

@@ -6,9 +6,10 @@ use std::path::Path;
 
 use glam::Vec3;
 use hush_scene::procedural::{
-    GENERATOR_VERSION, GeneratedScene, GeneratorOptions, Ingredients, LightKind, MaterialClass, Style, generate,
+    GENERATOR_VERSION, GeneratedScene, GeneratorOptions, Ingredients, LightKind, LightMaterial, MaterialClass, Style,
+    generate,
 };
-use hush_scene::{PixelFilter, Scene, ShapeKind};
+use hush_scene::{Material, PixelFilter, Reflectance, Scene, ShapeKind};
 
 use crate::{scratch, shared};
 
@@ -194,6 +195,40 @@ fn open_scenes_stand_under_a_sky_and_rooms_keep_their_seeds() {
         let asked = generate(seed, &GeneratorOptions { style: Some(style), ..Default::default() });
         assert_eq!(drawn.xml, asked.xml, "seed {seed}");
     }
+}
+
+/// `LightMaterial::Ceiling` gives a room's ceiling panels and lamps the ceiling's material and changes
+/// nothing else: the same shapes, where they were, emitting what they did; bulbs stay black.
+#[test]
+fn ceiling_lights_wear_the_ceiling_and_the_room_is_the_same() {
+    let dir = scratch("procedural-light-material");
+    let (mut panels, mut bulbs) = (0, 0);
+    for seed in 0..12u64 {
+        let black = generate(seed, &GeneratorOptions::default());
+        let ceiling =
+            generate(seed, &GeneratorOptions { light_material: LightMaterial::Ceiling, ..Default::default() });
+        assert!(!black.xml.contains("lights ceiling") && ceiling.xml.contains(", lights ceiling -->"), "seed {seed}");
+        let (a, b) = (
+            check_round_trip(&dir.join(format!("b{seed}")), &black),
+            check_round_trip(&dir.join(format!("c{seed}")), &ceiling),
+        );
+        assert_eq!(a.meshes.len(), b.meshes.len(), "seed {seed}");
+        let room_ceiling = b.meshes.iter().find(|m| m.name.starts_with("ceiling")).expect("a room has a ceiling");
+        for (m, n) in a.meshes.iter().zip(&b.meshes) {
+            assert_eq!((&m.name, &m.positions, m.emission), (&n.name, &n.positions, n.emission), "seed {seed}");
+            if n.name.starts_with("panel") || n.name.starts_with("lamp") {
+                panels += 1;
+                assert_eq!(n.material, room_ceiling.material, "seed {seed}: {}", n.name);
+                let black =
+                    matches!(m.material, Material::Diffuse { reflectance: Reflectance::Rgb(c), .. } if c == Vec3::ZERO);
+                assert!(black, "seed {seed}: {} is {:?}", m.name, m.material);
+            } else {
+                bulbs += usize::from(n.name.starts_with("bulb"));
+                assert_eq!(m.material, n.material, "seed {seed}: {}", n.name);
+            }
+        }
+    }
+    assert!(panels > 0 && bulbs > 0, "12 seeds drew {panels} panels and lamps and {bulbs} bulbs");
 }
 
 #[test]
