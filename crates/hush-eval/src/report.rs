@@ -30,12 +30,15 @@
 //!     "raw_spp": 64.0 | null,                  // ... and its spp
 //!     "time_percent": 25.0 | null,             // 100 · seconds / raw_seconds
 //!     "raw_error_same_time": 0.05 | null,      // raw path tracing's error after `seconds`
-//!     "status": "interpolated" | "below_ladder" | "above_ladder" | "no_ladder"
+//!     "status": "interpolated" | "below_ladder" | "above_ladder" | "no_ladder",
+//!     "top_spp": 1024.0,                       // below_ladder only: the ladder's highest spp ...
+//!     "top_time_percent": 3.4                  // ... and 100 · seconds / its render seconds (an upper bound)
 //!   }],
 //!   "tradeoff_overview": [{       // per (denoiser, spp, metric) over the views
 //!     "method": ..., "spp": 16, "metric": ..., "views": 12, "interpolated": 9,
 //!     "median_time_percent": 30.0 | null, "median_raw_spp": 55.0 | null,
-//!     "median_error_ratio_same_time": 3.1 | null
+//!     "median_error_ratio_same_time": 3.1 | null,
+//!     "median_top_time_percent": 3.4, "top_spp": 1024.0   // only where views are below the ladder
 //!   }],
 //!   "figures": [{
 //!     "title": ...,
@@ -350,7 +353,12 @@ impl Report {
                 };
                 let (below, above) = (count("below_ladder"), count("above_ladder"));
                 if below > 0 {
-                    s += &format!("; on {below} of {} views its relMSE is below raw path tracing's at the ladder's highest spp (not extrapolated)", o.views);
+                    s += &format!("; on {below} of {} views its relMSE is below raw path tracing's at the ladder's highest spp", o.views);
+                    if let (Some(top), Some(pct)) = (o.top_spp, o.median_top_time_percent) {
+                        let median = if below == 1 { "" } else { "a median " };
+                        s += &format!(" ({top:.0}), in {median}{pct:.1} % of that render's time");
+                    }
+                    s += " (not extrapolated)";
                 }
                 if above > 0 {
                     s += &format!("; on {above} of {} views raw path tracing is better already at its lowest spp", o.views);

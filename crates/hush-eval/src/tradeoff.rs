@@ -186,6 +186,13 @@ pub struct Comparison {
     pub raw_error_same_time: Option<f64>,
     /// `interpolated`, `below_ladder`, `above_ladder` or `no_ladder` (see [`Reach`]).
     pub status: String,
+    /// For `below_ladder`: the ladder's highest spp, whose error this one is below ...
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub top_spp: Option<f64>,
+    /// ... and `100 · seconds / ` that rung's seconds: raw path tracing would need more than that rung to reach
+    /// this error, so this is an upper bound on the share of raw time ([`Comparison::time_percent`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub top_time_percent: Option<f64>,
 }
 
 impl Comparison {
@@ -204,10 +211,19 @@ impl Comparison {
             (Some(spp), Some(pct)) => {
                 let _ = write!(s, "reaches the error of raw {spp:.1} spp in {pct:.1} % of its time");
             }
-            _ => s.push_str(match self.status.as_str() {
-                "below_ladder" => "raw path tracing does not reach this error within its spp ladder (not extrapolated)",
-                "above_ladder" => "raw path tracing is already better at its lowest spp",
-                _ => "no raw spp ladder to compare with (fewer than two rungs with render times)",
+            _ => s.push_str(&match (self.status.as_str(), self.top_spp, self.top_time_percent) {
+                ("below_ladder", Some(top), Some(pct)) => format!(
+                    "below raw path tracing's error at the ladder's highest spp ({top:.0}) in {pct:.1} % of that \
+                     render's time; raw path tracing does not reach this error within its spp ladder (not extrapolated)"
+                ),
+                _ => match self.status.as_str() {
+                    "below_ladder" => {
+                        "raw path tracing does not reach this error within its spp ladder (not extrapolated)"
+                    }
+                    "above_ladder" => "raw path tracing is already better at its lowest spp",
+                    _ => "no raw spp ladder to compare with (fewer than two rungs with render times)",
+                }
+                .to_string(),
             }),
         }
         match self.raw_error_same_time {
@@ -239,6 +255,8 @@ pub fn compare_to_raw(rows: &[Row]) -> Vec<Comparison> {
                 Reach::At { seconds, spp } => (Some(seconds), Some(spp)),
                 _ => (None, None),
             };
+            // The rungs are in spp order: the last is the ladder's highest.
+            let top = raw.last().filter(|_| reach == Reach::BelowLadder);
             out.push(Comparison {
                 view: row.view.clone(),
                 method: row.method.clone(),
@@ -251,6 +269,8 @@ pub fn compare_to_raw(rows: &[Row]) -> Vec<Comparison> {
                 time_percent: raw_seconds.map(|t| 100.0 * seconds / t),
                 raw_error_same_time: error_at(raw, seconds),
                 status: reach.status().into(),
+                top_spp: top.map(|p| p.spp),
+                top_time_percent: top.map(|p| 100.0 * seconds / p.seconds),
             });
         }
     }
@@ -301,6 +321,12 @@ pub struct Overview {
     pub median_raw_spp: Option<f64>,
     /// Median over the views with an equal-time error of raw path tracing's error ÷ the denoiser's.
     pub median_error_ratio_same_time: Option<f64>,
+    /// Over the views below the ladder: the median of `top_time_percent`, and the lowest of their ladders'
+    /// highest spp.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub median_top_time_percent: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub top_spp: Option<f64>,
 }
 
 /// Groups `comparisons` by (metric, method, spp), in order of first appearance, with medians over views.
@@ -325,6 +351,8 @@ pub fn overview(comparisons: &[Comparison]) -> Vec<Overview> {
                 median_time_percent: median_of(|c| c.time_percent),
                 median_raw_spp: median_of(|c| c.raw_spp),
                 median_error_ratio_same_time: median_of(|c| Some(c.raw_error_same_time? / c.error)),
+                median_top_time_percent: median_of(|c| c.top_time_percent),
+                top_spp: group.iter().filter_map(|c| c.top_spp).min_by(f64::total_cmp),
             }
         })
         .collect()

@@ -93,6 +93,20 @@ fn compare_to_raw_gives_equal_error_and_equal_time() {
     let s = all.iter().find(|c| c.metric == ErrorMetric::OneMinusSsim).unwrap();
     assert_eq!((s.status.as_str(), s.raw_seconds, s.time_percent), ("below_ladder", None, None));
     assert!(s.sentence().contains("does not reach this error within its spp ladder (not extrapolated)"));
+    // Below the ladder's last rung (64 spp in 16 s) in 0.5 s: 3.125 % of that render's time, an upper bound.
+    assert_eq!(s.top_spp, Some(64.0));
+    assert!(close(s.top_time_percent.unwrap(), 3.125), "{s:?}");
+    assert!(
+        s.sentence().contains("below raw path tracing's error at the ladder's highest spp (64) in 3.1 % of"),
+        "{}",
+        s.sentence()
+    );
+    let o = tradeoff::overview(&all);
+    let o = o.iter().find(|o| o.metric == ErrorMetric::OneMinusSsim).unwrap();
+    assert_eq!((o.interpolated, o.top_spp), (0, Some(64.0)));
+    assert!(close(o.median_top_time_percent.unwrap(), 3.125), "{o:?}");
+    // An interpolated comparison has no top rung.
+    assert_eq!((c.top_spp, c.top_time_percent), (None, None));
 }
 
 #[test]
