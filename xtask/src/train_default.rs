@@ -48,8 +48,63 @@ const OPEN_TENT_FROM: u32 = 13;
 /// gives them a halo (7 to 32 in the reference) that a 64-spp render mostly misses, and OIDN fills in more of it.
 const LAMPS: u32 = 12;
 const LAMPS_TENT_FROM: u32 = 7;
-/// The generated scenes beside the rooms: (style, how many, the first with a tent filter).
-const GENERATED: [(&str, u32, u32); 2] = [("open", OPEN, OPEN_TENT_FROM), ("lamps", LAMPS, LAMPS_TENT_FROM)];
+/// Rooms whose ceiling panels and lamps wear the ceiling's material (`hush scene generate --seed K
+/// --light-material ceiling`, each room's style drawn from its seed), generated into
+/// `target/train-default/ceiling-lit/ceiling-lit-K/`. Every other generated light is black, so its edge shows in
+/// the albedo; the Cornell box's light is the ceiling's white, and the box was the only training scene where
+/// nothing but the colour marks a light's edge. At 512² from 16 spp the shipped model spread the box's light into
+/// the ceiling beside it (docs/results/train-default/README.md). A room's camera looks into it, mostly below
+/// its ceiling: the seeds are those of 1 to 40 whose own camera sees a ceiling light (`hush render
+/// --max-depth 1` of the scene with every other emitter taken out: 28 to 532 of its 96² pixels).
+const CEILING_LIT: [u32; 10] = [3, 5, 7, 19, 20, 29, 32, 33, 34, 37];
+/// `[1, 2, ..., N]`.
+const fn one_to<const N: usize>() -> [u32; N] {
+    let mut seeds = [0; N];
+    let mut i = 0;
+    while i < N {
+        seeds[i] = i as u32 + 1;
+        i += 1;
+    }
+    seeds
+}
+/// A group of generated scenes beside the procedural rooms: `name-K` for each seed K, from `hush scene generate
+/// --seed K` with `args`; a tent-filtered film for seeds from `tent_from` on.
+struct Generated {
+    name: &'static str,
+    args: &'static [&'static str],
+    seeds: &'static [u32],
+    tent_from: u32,
+}
+
+/// The generated scenes beside the procedural rooms.
+const GENERATED: [Generated; 3] = [
+    Generated {
+        name: "open",
+        args: &["--style", "open"],
+        seeds: &one_to::<{ OPEN as usize }>(),
+        tent_from: OPEN_TENT_FROM,
+    },
+    Generated {
+        name: "lamps",
+        args: &["--style", "lamps"],
+        seeds: &one_to::<{ LAMPS as usize }>(),
+        tent_from: LAMPS_TENT_FROM,
+    },
+    Generated { name: "ceiling-lit", args: &["--light-material", "ceiling"], seeds: &CEILING_LIT, tent_from: u32::MAX },
+];
+
+impl Generated {
+    /// The seeds as the card's shell loop lists them: `$(seq 1 N)` when they are 1 to N.
+    fn shell_seeds(&self) -> String {
+        let n = self.seeds.len() as u32;
+        if self.seeds.iter().copied().eq(1..=n) {
+            format!("$(seq 1 {n})")
+        } else {
+            self.seeds.iter().map(u32::to_string).collect::<Vec<_>>().join(" ")
+        }
+    }
+}
+
 /// The scenes no model trains on, of different kinds: glossy plates under four lights, an open scene of
 /// spheres under a sky, and two generated rooms.
 pub const TEST_SCENES: [&str; 4] = ["veach-mis", "spheres-sky", "proc-1-2", "proc-1-3"];
@@ -152,8 +207,8 @@ struct Shipped {
     init: &'static str,
     /// OIDN's name for the architecture of [`Self::init`].
     arch: &'static str,
-    /// The generated styles of [`GENERATED`] this model does not train on (`hush train --exclude
-    /// <style>-*`; their validation scenes leave the split too), so that one dataset serves both models.
+    /// The groups of [`GENERATED`] this model does not train on (`hush train --exclude <name>-*`; their
+    /// validation scenes leave the split too), so that one dataset serves both models.
     leaves_out: &'static [&'static str],
 }
 
@@ -195,9 +250,11 @@ impl Shipped {
         format!("data/weights/oidn-2.5.1/{}.tza", self.init)
     }
 
-    /// Whether `scene` is of a generated style this model leaves out.
+    /// Whether `scene` is of a generated group this model leaves out (`lamps-3`, not `lampshade-1`).
     fn leaves_out(&self, scene: &str) -> bool {
-        self.leaves_out.iter().any(|style| scene.strip_prefix(style).is_some_and(|rest| rest.starts_with('-')))
+        self.leaves_out.iter().any(|group| {
+            scene.strip_prefix(group).and_then(|rest| rest.strip_prefix('-')).is_some_and(|k| k.parse::<u32>().is_ok())
+        })
     }
 
     /// The validation scenes of this model: [`VALIDATION`] but those of the styles it leaves out.
@@ -207,7 +264,7 @@ impl Shipped {
 
     /// `hush train --exclude`'s patterns (empty: nothing left out).
     fn exclude(&self) -> Vec<String> {
-        self.leaves_out.iter().map(|style| format!("{style}-*")).collect()
+        self.leaves_out.iter().map(|group| format!("{group}-*")).collect()
     }
 
     /// The starting weights when they are not the official weights `hush eval` shows anyway.
@@ -384,15 +441,16 @@ struct Choice {
 /// writes atomically).
 fn generated_scenes(hush: &Path, dir: &Path) -> Result<Vec<std::path::PathBuf>> {
     let mut paths = Vec::new();
-    for (style, count, tent_from) in GENERATED {
-        for k in 1..=count {
-            let path = dir.join(format!("{style}/{style}-{k}/scene.xml"));
+    for Generated { name, args, seeds, tent_from } in GENERATED {
+        for &k in seeds {
+            let path = dir.join(format!("{name}/{name}-{k}/scene.xml"));
             if !path.is_file() {
                 let filter = if k >= tent_from { "tent" } else { "box" };
                 spawn(
                     Command::new(hush)
-                        .args(["scene", "generate", "--seed", &k.to_string(), "--style", style, "--filter", filter])
-                        .arg("--out")
+                        .args(["scene", "generate", "--seed", &k.to_string()])
+                        .args(args)
+                        .args(["--filter", filter, "--out"])
                         .arg(&path),
                 )?;
             }
@@ -637,12 +695,26 @@ fn model_card(
         oidn = model.oidn,
         scenes = SCENES.join(" "),
         generate = GENERATED
-            .map(|(style, count, tent_from)| format!(
-                "for K in $(seq 1 {count}); do F=box; [ $K -ge {tent_from} ] && F=tent; hush scene generate --seed $K \
-                 --style {style} --filter $F --out target/train-default/{style}/{style}-$K/scene.xml; done\n"
-            ))
-            .concat(),
-        generated = GENERATED.map(|(style, ..)| format!("target/train-default/{style}/{style}-*/scene.xml")).join(" "),
+            .iter()
+            .map(|g| {
+                let filter = match g.tent_from {
+                    u32::MAX => "F=box".to_string(),
+                    from => format!("F=box; [ $K -ge {from} ] && F=tent"),
+                };
+                format!(
+                    "for K in {}; do {filter}; hush scene generate --seed $K {} --filter $F \
+                     --out target/train-default/{name}/{name}-$K/scene.xml; done\n",
+                    g.shell_seeds(),
+                    g.args.join(" "),
+                    name = g.name,
+                )
+            })
+            .collect::<String>(),
+        generated = GENERATED
+            .iter()
+            .map(|g| format!("target/train-default/{0}/{0}-*/scene.xml", g.name))
+            .collect::<Vec<_>>()
+            .join(" "),
         tests = TEST_SCENES.join(","),
         dataset = DATASET_ARGS.join(" "),
         count = facts.train_scenes.len(),
@@ -801,6 +873,20 @@ mod tests {
         );
         assert!(text.contains("worst case at any spp -0.50 dB; worst case at 4-64 spp -0.50 dB."), "{text}");
         assert!(as_shipped(&cases[..2], &[]).contains("2 of 2 cases hold.\n"));
+    }
+
+    /// The card's shell loop names each group's seeds; `leaves_out` matches a group's scenes only.
+    #[test]
+    fn generated_groups_list_their_seeds_as_the_card_shows_them() {
+        let [open, lamps, ceiling] = &GENERATED;
+        assert_eq!((open.shell_seeds(), lamps.shell_seeds()), ("$(seq 1 24)".into(), "$(seq 1 12)".into()));
+        assert_eq!(ceiling.shell_seeds(), "3 5 7 19 20 29 32 33 34 37");
+        assert_eq!(ceiling.args, ["--light-material", "ceiling"]);
+        // A group name is a prefix only before a seed: `ceiling-lit-3`, never `ceiling-lit` itself.
+        let leaves = Shipped { leaves_out: &["ceiling-lit"], ..MODELS[1] };
+        assert!(
+            leaves.leaves_out("ceiling-lit-3") && !leaves.leaves_out("ceiling-lit-x") && !leaves.leaves_out("ceiling")
+        );
     }
 
     /// `hush_alb_nrm` neither trains nor validates on the lamps scenes, `hush_color` does both; the command
