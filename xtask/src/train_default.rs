@@ -15,7 +15,8 @@
 //! 4–64 spp, no case there below −0.3 dB); `hush_color` meets the average, not the worst case (its card).
 //! One dataset serves both: `hush_alb_nrm` leaves the lamps scenes out (`hush train --exclude 'lamps-*'`), as
 //! the shipped model was trained before they joined; trained with them it is a candidate whose worst case
-//! misses the bar (docs/results/train-default/README.md).
+//! misses the bar (docs/results/train-default/README.md). `hush_color` leaves the ceiling-lit rooms out, for
+//! the same reason (its worst case).
 
 use std::path::Path;
 use std::process::Command;
@@ -240,7 +241,11 @@ const MODELS: [Shipped; 2] = [
         oidn: "rt_hdr",
         init: "rt_hdr",
         arch: "unet",
-        leaves_out: &[],
+        // Trained with the ceiling-lit rooms (the same recipe, t = 1 again) it was a little better on
+        // validation (+0.598 dB against +0.593) and worse on the test scenes' worst case (veach-mis's own
+        // camera at 64 spp −1.32 against −0.96; mean at 4–64 spp +0.20 against +0.21): the shipped model is
+        // the one trained without them, which this reproduces.
+        leaves_out: &["ceiling-lit"],
     },
 ];
 
@@ -883,14 +888,14 @@ mod tests {
         assert_eq!(ceiling.shell_seeds(), "3 5 7 19 20 29 32 33 34 37");
         assert_eq!(ceiling.args, ["--light-material", "ceiling"]);
         // A group name is a prefix only before a seed: `ceiling-lit-3`, never `ceiling-lit` itself.
-        let leaves = Shipped { leaves_out: &["ceiling-lit"], ..MODELS[1] };
+        let color = &MODELS[1];
         assert!(
-            leaves.leaves_out("ceiling-lit-3") && !leaves.leaves_out("ceiling-lit-x") && !leaves.leaves_out("ceiling")
+            color.leaves_out("ceiling-lit-3") && !color.leaves_out("ceiling-lit-x") && !color.leaves_out("ceiling")
         );
     }
 
-    /// `hush_alb_nrm` neither trains nor validates on the lamps scenes, `hush_color` does both; the command
-    /// shows the pattern quoted.
+    /// `hush_alb_nrm` neither trains nor validates on the lamps scenes, `hush_color` does both and leaves the
+    /// ceiling-lit rooms out; the command shows the pattern quoted.
     #[test]
     fn each_model_has_its_scene_set() {
         let [alb_nrm, color] = &MODELS;
@@ -898,13 +903,18 @@ mod tests {
         assert_eq!(alb_nrm.exclude(), ["lamps-*"]);
         assert!(alb_nrm.leaves_out("lamps-3") && !alb_nrm.leaves_out("lampshade-1") && !alb_nrm.leaves_out("open-3"));
         assert_eq!(color.validation(), VALIDATION);
-        assert!(color.exclude().is_empty() && !color.leaves_out("lamps-3"));
+        assert!(color.exclude() == ["ceiling-lit-*"] && !color.leaves_out("lamps-3"));
         let (_, shown) = train_command(Path::new("hush"), Path::new("d"), Path::new("r"), alb_nrm, 10);
         assert!(
             shown.contains("--validation proc-1-11,proc-1-12,open-12,open-24 --exclude 'lamps-*' --steps 10"),
             "{shown}"
         );
         let (_, shown) = train_command(Path::new("hush"), Path::new("d"), Path::new("r"), color, 10);
-        assert!(shown.contains("--validation proc-1-11,proc-1-12,open-12,open-24,lamps-12 --steps 10"), "{shown}");
+        assert!(
+            shown.contains(
+                "--validation proc-1-11,proc-1-12,open-12,open-24,lamps-12 --exclude 'ceiling-lit-*' --steps 10"
+            ),
+            "{shown}"
+        );
     }
 }
