@@ -211,20 +211,22 @@ impl Comparison {
             (Some(spp), Some(pct)) => {
                 let _ = write!(s, "reaches the error of raw {spp:.1} spp in {pct:.1} % of its time");
             }
-            _ => s.push_str(&match (self.status.as_str(), self.top_spp, self.top_time_percent) {
-                ("below_ladder", Some(top), Some(pct)) => format!(
-                    "below raw path tracing's error at the ladder's highest spp ({top:.0}) in {pct:.1} % of that \
-                     render's time; raw path tracing does not reach this error within its spp ladder (not extrapolated)"
-                ),
-                _ => match self.status.as_str() {
+            _ => {
+                if let (Some(top), Some(pct)) = (self.top_spp, self.top_time_percent) {
+                    let _ = write!(
+                        s,
+                        "below raw path tracing's error at the ladder's highest spp ({top:.0}) in {pct:.1} % of that \
+                         render's time; "
+                    );
+                }
+                s.push_str(match self.status.as_str() {
                     "below_ladder" => {
                         "raw path tracing does not reach this error within its spp ladder (not extrapolated)"
                     }
                     "above_ladder" => "raw path tracing is already better at its lowest spp",
                     _ => "no raw spp ladder to compare with (fewer than two rungs with render times)",
-                }
-                .to_string(),
-            }),
+                });
+            }
         }
         match self.raw_error_same_time {
             Some(e) => {
